@@ -1,0 +1,47 @@
+"""Command line: ``python -m core COMMAND ...``. Errors exit with code 2 and one line on stderr.
+
+Each command lives in its own module with ``add_arguments(parser)`` and ``run(args) -> int``; the
+table below names them, and modules are imported only when their command runs."""
+import argparse
+import importlib
+import sys
+
+from .errors import ConformalError
+
+# command name -> (module, one-line help)
+COMMANDS = {
+    'flatten': ('cmd_flatten', 'flatten a disk mesh conformally and write an OBJ with UVs'),
+    'make-surface': ('cmd_surface', 'write one of the test surfaces (DESIGN.md section 7)'),
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise ConformalError(f"{self.prog}: {message}")
+
+
+def build_parser():
+    parser = _Parser(prog='python -m core', description='Conformal Flatten core tools')
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
+    sub.required = True
+    for name, (module, help_text) in COMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        p.set_defaults(_module=module)
+        importlib.import_module(f'.{module}', __package__).add_arguments(p)
+    return parser
+
+
+def main(argv=None):
+    try:
+        args = build_parser().parse_args(argv)
+        module = importlib.import_module(f'.{args._module}', __package__)
+        return module.run(args) or 0
+    except ConformalError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+    except MemoryError:
+        print("error: out of memory: the mesh is too large for this machine", file=sys.stderr)
+        return 2

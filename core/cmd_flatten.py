@@ -1,0 +1,34 @@
+"""``python -m core flatten IN.obj OUT.obj [--boundary free|area|uniform] [--json]``."""
+import json
+
+import numpy as np
+
+from .flatten import BOUNDARY_MODES, FIT_MODES, flatten
+from .objio import read_obj, write_obj
+
+
+def add_arguments(p):
+    p.add_argument('input', help='input OBJ (a disk-topology mesh; n-gons are triangulated)')
+    p.add_argument('output', help='output OBJ with one vt per vertex')
+    p.add_argument('--boundary', choices=BOUNDARY_MODES, default='uniform',
+                   help='boundary mode (default: uniform)')
+    p.add_argument('--fit', choices=FIT_MODES, default='true_scale',
+                   help='UV scale: true_scale (UV area = 3D area) or unit_square')
+    p.add_argument('--json', action='store_true', help='print the report as JSON')
+
+
+def run(args):
+    mesh = read_obj(args.input)
+    F, _ = mesh.triangles()
+    res = flatten(mesh.V, F, boundary=args.boundary, fit=args.fit)
+    # faces go back as the input's polygons: UVs are per vertex
+    starts = np.r_[0, np.cumsum(mesh.sizes)[:-1]]
+    polys = [mesh.corner_verts[s:s + k] for s, k in zip(starts.tolist(), mesh.sizes.tolist())]
+    write_obj(args.output, mesh.V, polys if (mesh.sizes != 3).any() else F, res.uv)
+    if args.json:
+        print(json.dumps(res.report))
+    else:
+        r = res.report
+        print(f"{args.boundary}: mu_ratio {r['mu_ratio']:.4f}, qc_mean {r['qc_mean']:.4f}, "
+              f"flips {r['flips']}, {r['seconds']['total']:.2f} s")
+    return 0

@@ -1,0 +1,222 @@
+"""Conformal flattening of a disk with boundary scale factors (DESIGN.md section 2).
+
+The construction follows Boundary First Flattening: choose boundary log scale factors ``u_B``, solve
+the discrete Yamabe equation for the interior, build the boundary curve with the target curvature and
+lengths, and extend it conformally (x harmonic, y its conjugate harmonic). Boundary modes:
+
+- ``free``: LSCM with two pinned vertices (a baseline).
+- ``area``: ``u_B = 0``, boundary lengths kept.
+- ``uniform``: the paper's objective, the most uniform conformal factor ``mu = exp(u)``. See
+  ``core.uniform``.
+"""
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ConformalError
+from .geometry import angle_sums, face_areas
+from .laplacian import cotan_laplacian, face_gradients, gradient, divergence
+from .measures import uv_measures, conformal_factor
+from .solve import Factor
+from .validate import check_mesh, DEFAULT_MAX_FACES
+
+BOUNDARY_MODES = ('free', 'area', 'uniform')
+FIT_MODES = ('true_scale', 'unit_square')
+
+
+@dataclass
+class FlattenResult:
+    """``uv`` (n,2) float64 UV per vertex (counter-clockwise like the faces); ``mu`` (m,) realised
+    conformal factor per triangle (total UV area normalised to the 3D area); ``u`` (n,) log scale
+    factor per vertex from the Yamabe solve (None for ``free``); ``report`` dict of measures, bound
+    and timings (seconds)."""
+    uv: np.ndarray
+    mu: np.ndarray
+    u: np.ndarray = None
+    report: dict = field(default_factory=dict)
+
+
+class DiskSystem:
+    """The prefactored linear algebra of one disk mesh. ``V`` (n,3), ``F`` (m,3), ``loop`` (nb,) the
+    boundary with the surface on its left.
+
+    Attributes: ``L`` cotan Laplacian, ``B``/``I`` boundary and interior indices, ``Omega`` (n,) angle
+    defect, ``k`` (nb,) boundary turning angles, ``l`` (nb,) boundary edge lengths (edge j runs from
+    B[j] to B[j+1])."""
+
+    def __init__(self, V, F, loop):
+        self.V, self.F = V, F
+        n = self.n = len(V)
+        self.B = np.asarray(loop, np.int64)
+        mask = np.zeros(n, bool)
+        mask[self.B] = True
+        self.I = np.nonzero(~mask)[0]
+        self.L = cotan_laplacian(V, F)
+        LI = self.L[self.I]
+        self.L_II = LI[:, self.I].tocsc()
+        self.L_IB = LI[:, self.B].tocsc()
+        self._II = Factor(self.L_II) if len(self.I) else None
+        self._neumann = None
+        s = angle_sums(V, F)
+        self.Omega = np.where(mask, 0.0, 2 * np.pi - s)
+        self.k = np.pi - s[self.B]
+        self.l = np.linalg.norm(V[np.roll(self.B, -1)] - V[self.B], axis=1)
+        self.G, self.N, self.A = face_gradients(V, F)
+
+    # --- step 2: interior log scale factors -----------------------------------------------------
+    def solve_II(self, b):
+        """``L_II^-1 b`` for (nI,) or (nI,r) ``b``."""
+        if self._II is None:
+            return np.zeros_like(b)
+        return self._II.solve(b)
+
+    def yamabe(self, uB):
+        """Per-vertex ``u`` (n,) with boundary values ``uB`` (nb,): ``L_II u_I = Omega_I - L_IB u_B``."""
+        u = np.zeros(self.n)
+        u[self.B] = uB
+        u[self.I] = self.solve_II(self.Omega[self.I] - self.L_IB @ uB)
+        return u
+
+    def harmonic(self, fB):
+        """Harmonic extension (n,) or (n,r) of boundary values ``fB`` (nb,) or (nb,r)."""
+        f = np.zeros((self.n,) + np.shape(fB)[1:])
+        f[self.B] = fB
+        f[self.I] = -self.solve_II(self.L_IB @ fB)
+        return f
+
+    # --- steps 3-4: the boundary curve ---------------------------------------------------------
+    def boundary_curve(self, u):
+        """Closed boundary polygon (nb,2) with turning angles ``k~ = k - (L u)_B`` and lengths closest
+        to ``l~ = exp((u_i + u_j)/2) l`` in the weighted least-squares sense."""
+        uB = u[self.B]
+        kt = self.k - (self.L @ u)[self.B]
+        if abs(kt.sum() - 2 * np.pi) > 1e-6 * max(1.0, np.abs(kt).sum()):
+            raise ConformalError(f"target boundary curvature sums to {kt.sum():.6f}, not 2*pi: "
+                                 "the mesh is not a topological disk")
+        lt = np.exp(0.5 * (uB + np.roll(uB, -1))) * self.l
+        phi = np.cumsum(kt)
+        T = np.stack([np.cos(phi), np.sin(phi)], axis=1)
+        M = T.T @ (lt[:, None] * T)
+        ls = lt - lt * (T @ np.linalg.solve(M, T.T @ lt))
+        if (ls <= 0).any():
+            raise ConformalError("the boundary scale factors are too extreme to close the boundary "
+                                 "curve: try the 'area' boundary mode")
+        P = np.zeros((len(ls), 2))
+        P[1:] = np.cumsum(ls[:-1, None] * T[:-1], axis=0)
+        return P
+
+    # --- step 5: conformal extension ---------------------------------------------------------
+    def conjugate(self, x):
+        """Conjugate harmonic ``y`` (n,) of ``x`` (n,): least-squares ``grad y = n x grad x``, i.e.
+        ``L y = div(n x grad x)``, with y fixed at one boundary vertex."""
+        if self._neumann is None:
+            keep = np.arange(self.n) != self.B[0]
+            self._keep = keep
+            self._neumann = Factor(self.L[keep][:, keep])
+        X = np.cross(self.N, gradient(self.G, self.F, x))
+        b = divergence(self.G, self.F, self.A, X, self.n)
+        y = np.zeros(self.n)
+        y[self._keep] = self._neumann.solve(b[self._keep])
+        return y
+
+    def extend(self, P):
+        """UV (n,2) from the boundary polygon ``P`` (nb,2): x harmonic, y its conjugate. The result
+        is shifted so that y matches the polygon on average along the boundary."""
+        x = self.harmonic(P[:, 0])
+        y = self.conjugate(x)
+        y += np.mean(P[:, 1] - y[self.B])
+        return np.stack([x, y], axis=1)
+
+    def map_from_u(self, u):
+        """UV (n,2) of the conformal map with log scale factor ``u`` (n,)."""
+        return self.extend(self.boundary_curve(u))
+
+
+def face_log_scale(system, uv):
+    """Realised per-triangle log scale ``s_T = 0.5 log(A_uv / A_3d)`` (m,); uses signed UV areas, so
+    a flipped triangle yields NaN."""
+    W = uv[system.F]
+    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+    a = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return 0.5 * np.log(a / system.A)
+
+
+def normalise_uv(V, F, uv, fit='true_scale'):
+    """Centre, rotate to principal axes and scale a UV map (n,2). ``true_scale``: total UV area equals
+    total 3D area. ``unit_square``: fit into [0,1]^2 keeping the aspect ratio."""
+    if fit not in FIT_MODES:
+        raise ConformalError(f"unknown fit {fit!r}: use one of {', '.join(FIT_MODES)}")
+    W = uv[F]
+    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+    a = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    c = (W.mean(axis=1) * a[:, None]).sum(0) / a.sum()
+    uv = uv - c
+    C = (uv * np.bincount(F.ravel(), np.repeat(np.abs(a), 3), minlength=len(uv))[:, None]).T @ uv
+    w, R = np.linalg.eigh(C)
+    R = R[:, ::-1]
+    if np.linalg.det(R) < 0:
+        R[:, 1] *= -1
+    uv = uv @ R
+    if fit == 'true_scale':
+        return uv * np.sqrt(face_areas(V, F).sum() / a.sum())
+    lo, hi = uv.min(0), uv.max(0)
+    size = (hi - lo).max()
+    return (uv - lo) / size + (1 - (hi - lo) / size) / 2
+
+
+def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FACES, bound=None,
+            progress=None, **options):
+    """Flatten a disk-topology triangle mesh conformally.
+
+    V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise. boundary: 'free', 'area' or
+    'uniform'. fit: 'true_scale' (UV area = 3D area, mesh units) or 'unit_square'. bound: compute
+    the vertex-level L-inf certificate (default: for 'uniform'). progress: optional callable
+    ``progress(fraction, message)``. Extra ``options`` go to ``core.uniform.optimise``.
+    Returns ``FlattenResult``. Raises ``ConformalError`` on bad input."""
+    if boundary not in BOUNDARY_MODES:
+        raise ConformalError(f"unknown boundary mode {boundary!r}: use one of {', '.join(BOUNDARY_MODES)}")
+    if fit not in FIT_MODES:
+        raise ConformalError(f"unknown fit {fit!r}: use one of {', '.join(FIT_MODES)}")
+    report_progress = progress or (lambda f, msg: None)
+    timings = {}
+    t0 = time.perf_counter()
+    info = check_mesh(V, F, kind='disk', max_faces=max_faces)
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    timings['check'] = time.perf_counter() - t0
+    report_progress(0.05, 'factorising the Laplacian')
+    t = time.perf_counter()
+    system = DiskSystem(V, F, info.boundary)
+    timings['factor'] = time.perf_counter() - t
+    report = {'boundary': boundary, 'vertices': len(V), 'faces': len(F),
+              'boundary_vertices': int(len(info.boundary))}
+    u = None
+    t = time.perf_counter()
+    if boundary == 'free':
+        from .lscm import lscm
+        uv = lscm(V, system.L, system.B)
+    elif boundary == 'area':
+        u = system.yamabe(np.zeros(len(system.B)))
+        uv = system.map_from_u(u)
+    else:
+        from .uniform import optimise
+        u, uv, opt = optimise(system, progress=report_progress, **options)
+        report.update(opt)
+    timings['solve'] = time.perf_counter() - t
+    if bound is None:
+        bound = boundary == 'uniform'
+    if bound:
+        from .uniform import vertex_bound
+        t = time.perf_counter()
+        report['bound_vertex'] = vertex_bound(system)
+        timings['bound'] = time.perf_counter() - t
+    report_progress(0.95, 'measuring')
+    uv = normalise_uv(V, F, uv, fit)
+    report.update(uv_measures(V, F, uv))
+    if u is not None:
+        report['vertex_ratio'] = float(np.exp(u.min() - u.max()))
+    timings['total'] = time.perf_counter() - t0
+    report['seconds'] = {k: round(v, 4) for k, v in timings.items()}
+    return FlattenResult(uv=uv, mu=conformal_factor(V, F, uv), u=u, report=report)

@@ -1,0 +1,51 @@
+"""Per-triangle and per-vertex discrete geometry (DESIGN.md section 1).
+
+All functions take ``V`` (n,3) float64 positions and ``F`` (m,3) int64 triangles, counter-clockwise.
+Lengths are in the mesh's units, angles in radians.
+"""
+import numpy as np
+
+
+def face_normals_unnormalised(V, F):
+    """(m,3) cross products (V1-V0) x (V2-V0); their length is twice the triangle area."""
+    P = V[F]
+    return np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+
+
+def face_areas(V, F):
+    """Triangle areas ``A`` (m,), in squared mesh units."""
+    return 0.5 * np.linalg.norm(face_normals_unnormalised(V, F), axis=1)
+
+
+def edge_vectors(V, F):
+    """(m,3,3): row k is the edge vector opposite corner k, ``V[F[:,k+2]] - V[F[:,k+1]]``."""
+    P = V[F]
+    return np.stack([P[:, 2] - P[:, 1], P[:, 0] - P[:, 2], P[:, 1] - P[:, 0]], axis=1)
+
+
+def corner_angles(V, F):
+    """Corner angles ``theta`` (m,3): theta[t,k] is the angle of triangle t at vertex F[t,k]."""
+    P = V[F]
+    a = P[:, [1, 2, 0]] - P            # corner k -> corner k+1
+    b = P[:, [2, 0, 1]] - P            # corner k -> corner k+2
+    cross = np.linalg.norm(np.cross(a, b), axis=2)
+    dot = np.einsum('mkd,mkd->mk', a, b)
+    return np.arctan2(cross, dot)
+
+
+def angle_sums(V, F, n=None):
+    """Sum of corner angles at each vertex, (n,)."""
+    n = len(V) if n is None else n
+    return np.bincount(F.ravel(), corner_angles(V, F).ravel(), minlength=n)
+
+
+def angle_defect(V, F, boundary_mask):
+    """Discrete Gaussian curvature ``Omega`` (n,): 2*pi - angle sum at interior vertices, 0 on the boundary."""
+    s = angle_sums(V, F)
+    return np.where(boundary_mask, 0.0, 2 * np.pi - s)
+
+
+def boundary_curvature(V, F, boundary_mask):
+    """Geodesic curvature (turning angle) ``k`` (n,): pi - angle sum at boundary vertices, 0 inside."""
+    s = angle_sums(V, F)
+    return np.where(boundary_mask, np.pi - s, 0.0)

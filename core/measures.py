@@ -1,0 +1,61 @@
+"""The measures of DESIGN.md section 3, for a UV map or a map to the sphere."""
+import numpy as np
+
+
+def _local_frames(P):
+    """P (m,3,3) triangles -> Q (m,3,2) the same triangles in their own plane, and areas (m,)."""
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    nrm = np.cross(e1, e2)
+    dbl = np.linalg.norm(nrm, axis=1)
+    x = e1 / np.maximum(np.linalg.norm(e1, axis=1), np.finfo(float).tiny)[:, None]
+    y = np.cross(nrm / np.maximum(dbl, np.finfo(float).tiny)[:, None], x)
+    Q = np.zeros((len(P), 3, 2))
+    Q[:, 1] = np.c_[(e1 * x).sum(1), (e1 * y).sum(1)]
+    Q[:, 2] = np.c_[(e2 * x).sum(1), (e2 * y).sum(1)]
+    return Q, 0.5 * dbl
+
+
+def jacobians(V, F, UV):
+    """Per-triangle 2x2 Jacobians (m,2,2) from each triangle's own plane to the UV plane, and the
+    3D areas (m,)."""
+    Q, A = _local_frames(V[F])
+    dP = np.stack([Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]], 2)
+    W = UV[F]
+    dQ = np.stack([W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]], 2)
+    return dQ @ np.linalg.inv(dP), A
+
+
+def conformal_factor(V, F, UV):
+    """Per-triangle conformal factor ``mu`` (m,): sqrt|det J|, normalised so that the total UV area
+    equals the total 3D area (dimensionless)."""
+    J, A = jacobians(V, F, UV)
+    det = np.abs(np.linalg.det(J))
+    c = np.sqrt((det * A).sum() / A.sum())
+    return np.sqrt(det) / c
+
+
+def summarise(mu, qc, A, orient):
+    """The report numbers from per-triangle ``mu``, ``qc`` (m,), areas ``A`` and signed orientation
+    (positive = agrees with the majority)."""
+    w = A / A.sum()
+    return {
+        'faces': int(len(mu)),
+        'flips': int((orient <= 0).sum()),
+        'mu_ratio': float(mu.min() / mu.max()),
+        'mu_ratio_p1_p99': float(np.percentile(mu, 1) / np.percentile(mu, 99)),
+        'qc_mean': float((qc * w).sum()),
+        'qc_max': float(qc.max()),
+    }
+
+
+def uv_measures(V, F, UV):
+    """DESIGN.md section 3 measures of a UV map: dict with faces, flips, mu_ratio, mu_ratio_p1_p99,
+    qc_mean (area-weighted) and qc_max. ``V`` (n,3), ``F`` (m,3), ``UV`` (n,2)."""
+    J, A = jacobians(V, F, UV)
+    s = np.linalg.svd(J, compute_uv=False)
+    det = np.linalg.det(J)
+    c = np.sqrt((np.abs(det) * A).sum() / A.sum())
+    mu = np.sqrt(np.abs(det)) / c
+    qc = s[:, 0] / np.maximum(s[:, 1], np.finfo(float).tiny)
+    orient = det * np.sign(np.median(det))
+    return summarise(mu, qc, A, orient)

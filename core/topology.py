@@ -1,0 +1,117 @@
+"""Combinatorics of a triangle mesh: edges, half-edge twins, boundary loops, components, Euler
+characteristic and vertex fans. ``F`` is (m,3) int64, counter-clockwise."""
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+
+def halfedges(F):
+    """(3m,2) directed half-edges; row 3*t+k runs from F[t,k] to F[t,k+1]."""
+    return np.stack([F, F[:, [1, 2, 0]]], axis=2).reshape(-1, 2)
+
+
+def duplicate_rows(F):
+    """(k,) indices of rows of ``F`` (m,3) whose sorted vertex triple repeats an earlier row."""
+    S = np.sort(F, axis=1)
+    order = np.lexsort((S[:, 2], S[:, 1], S[:, 0]))
+    S = S[order]
+    same = np.r_[False, (S[1:] == S[:-1]).all(axis=1)]
+    return np.sort(order[same])
+
+
+def _keys(H, n):
+    return H[:, 0].astype(np.int64) * n + H[:, 1]
+
+
+def twin_halfedges(F, n):
+    """(3m,) index of the opposite half-edge of each half-edge, -1 on the boundary. Assumes that no
+    directed half-edge appears twice (checked by ``validate``)."""
+    H = halfedges(F)
+    key = _keys(H, n)
+    order = np.argsort(key)
+    skey = key[order]
+    rkey = _keys(H[:, ::-1], n)
+    pos = np.searchsorted(skey, rkey)
+    pos = np.minimum(pos, len(skey) - 1)
+    found = skey[pos] == rkey
+    return np.where(found, order[pos], -1)
+
+
+def unique_edges(F):
+    """Undirected edges ``E`` (e,2) with E[:,0] < E[:,1], and how many triangles hold each, (e,)."""
+    H = np.sort(halfedges(F), axis=1)
+    n = int(F.max()) + 1
+    key, counts = np.unique(_keys(H, n), return_counts=True)
+    return np.stack([key // n, key % n], axis=1), counts
+
+
+def boundary_loops(F, n):
+    """Boundary loops as a list of (k,) int arrays of vertex indices, longest first. Each loop runs
+    with the surface on its left (the faces' counter-clockwise direction)."""
+    H = halfedges(F)
+    tw = twin_halfedges(F, n)
+    B = H[tw < 0]
+    if len(B) == 0:
+        return []
+    nxt = {}
+    for a, b in B.tolist():
+        nxt.setdefault(a, b)
+    loops, seen = [], set()
+    for start in B[:, 0].tolist():
+        if start in seen:
+            continue
+        loop, v = [], start
+        while v not in seen:
+            seen.add(v)
+            loop.append(v)
+            v = nxt.get(v)
+            if v is None:
+                break
+        loops.append(np.array(loop, dtype=np.int64))
+    loops.sort(key=len, reverse=True)
+    return loops
+
+
+def vertex_adjacency(F, n):
+    """(n,n) sparse 0/1 adjacency of the mesh's edges."""
+    H = halfedges(F)
+    A = sp.coo_matrix((np.ones(len(H)), (H[:, 0], H[:, 1])), shape=(n, n)).tocsr()
+    return ((A + A.T) > 0).astype(np.int8)
+
+
+def connected_components_of(F, n):
+    """(count, labels (n,)) of the vertex graph. Vertices in no face are components of their own."""
+    return connected_components(vertex_adjacency(F, n), directed=False)
+
+
+def face_components(F, n):
+    """(count, labels (m,)) of triangles connected through shared edges."""
+    m = len(F)
+    tw = twin_halfedges(F, n)
+    t = np.arange(3 * m) // 3
+    ok = tw >= 0
+    A = sp.coo_matrix((np.ones(ok.sum()), (t[ok], tw[ok] // 3)), shape=(m, m))
+    return connected_components(A, directed=False)
+
+
+def euler_characteristic(F):
+    """V - E + F over the vertices referenced by ``F``."""
+    nv = int(np.count_nonzero(np.bincount(F.ravel())))
+    ne = len(unique_edges(F)[0])
+    return nv - ne + len(F)
+
+
+def vertex_fans(F, n):
+    """(n,) number of edge-connected fans of triangles around each vertex. A manifold vertex has 1;
+    2 or more means the surface pinches there (a non-manifold vertex)."""
+    m = len(F)
+    tw = twin_halfedges(F, n)
+    # corner c = 3t+k sits at F[t,k]; half-edge 3t+k leaves it. Its twin 3t'+k' arrives at the same
+    # vertex, which is corner 3t'+(k'+1)%3 of the other triangle.
+    c = np.arange(3 * m)
+    ok = tw >= 0
+    other = (tw[ok] // 3) * 3 + (tw[ok] % 3 + 1) % 3
+    A = sp.coo_matrix((np.ones(ok.sum()), (c[ok], other)), shape=(3 * m, 3 * m))
+    _, lab = connected_components(A, directed=False)
+    pairs = np.unique(F.ravel().astype(np.int64) * (3 * m) + lab)
+    return np.bincount(pairs // (3 * m), minlength=n)

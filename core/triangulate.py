@@ -1,0 +1,80 @@
+"""Polygons to triangles. Polygons come packed like Blender's: ``corner_verts`` (c,) vertex index per
+corner and ``sizes`` (p,) corners per polygon, polygons stored one after another.
+
+Triangles and quads are split as fans; larger polygons are ear-clipped in their best-fit plane, so
+concave n-gons triangulate without overlaps. The result refers to corners, so per-corner data (UVs)
+can be written back to the polygons unchanged."""
+import numpy as np
+
+
+def _ear_clip(P):
+    """Triangulate one simple polygon with 2D corners P (k,2), counter-clockwise. Returns (k-2,3) local
+    corner indices."""
+    k = len(P)
+    idx = list(range(k))
+    out = []
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    guard = 0
+    while len(idx) > 3 and guard < 4 * k * k:
+        guard += 1
+        found = False
+        for t in range(len(idx)):
+            i0, i1, i2 = idx[t - 1], idx[t], idx[(t + 1) % len(idx)]
+            a, b, c = P[i0], P[i1], P[i2]
+            if cross(a, b, c) <= 0:
+                continue
+            inside = False
+            for j in idx:
+                if j in (i0, i1, i2):
+                    continue
+                p = P[j]
+                if cross(a, b, p) >= 0 and cross(b, c, p) >= 0 and cross(c, a, p) >= 0:
+                    inside = True
+                    break
+            if not inside:
+                out.append((i0, i1, i2))
+                idx.pop(t)
+                found = True
+                break
+        if not found:       # numerically degenerate polygon: finish as a fan
+            break
+    for t in range(1, len(idx) - 1):
+        out.append((idx[0], idx[t], idx[t + 1]))
+    return np.array(out, dtype=np.int64)
+
+
+def triangulate(corner_verts, sizes, V=None):
+    """Triangulate packed polygons.
+
+    corner_verts: (c,) int vertex index per corner. sizes: (p,) int >= 3. V: optional (n,3) positions,
+    used to ear-clip polygons of 5 or more corners (without it they are fanned).
+    Returns ``tri_corners`` (m,3) int64 corner indices and ``tri_poly`` (m,) int64 polygon index."""
+    corner_verts = np.asarray(corner_verts, np.int64)
+    sizes = np.asarray(sizes, np.int64)
+    start = np.r_[0, np.cumsum(sizes)[:-1]]
+    ntri = sizes - 2
+    tri_poly = np.repeat(np.arange(len(sizes)), ntri)
+    # fan: corner 0, j+1, j+2 for j = 0..size-3
+    first = np.r_[0, np.cumsum(ntri)[:-1]]
+    j = np.arange(len(tri_poly)) - np.repeat(first, ntri)
+    s = start[tri_poly]
+    tri = np.stack([s, s + j + 1, s + j + 2], axis=1)
+    if V is not None:
+        for p in np.nonzero(sizes >= 5)[0].tolist():
+            c = np.arange(start[p], start[p] + sizes[p])
+            Q = V[corner_verts[c]]
+            nrm = np.cross(Q - Q.mean(0), np.roll(Q, -1, 0) - Q.mean(0)).sum(0)
+            if np.linalg.norm(nrm) == 0:
+                continue
+            nrm /= np.linalg.norm(nrm)
+            ax = np.cross(nrm, [1.0, 0, 0]) if abs(nrm[0]) < 0.9 else np.cross(nrm, [0, 1.0, 0])
+            ax /= np.linalg.norm(ax)
+            ay = np.cross(nrm, ax)
+            P2 = np.c_[Q @ ax, Q @ ay]
+            local = _ear_clip(P2)
+            rows = np.nonzero(tri_poly == p)[0]
+            tri[rows] = c[local]
+    return tri, tri_poly

@@ -1,0 +1,138 @@
+"""Input checks. Each failure raises ``ConformalError`` with what is wrong and what to do."""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ConformalError
+from .geometry import face_areas
+from . import topology
+
+DEFAULT_MAX_FACES = 5_000_000
+
+
+@dataclass
+class MeshInfo:
+    """What ``check_mesh`` found: counts and the boundary loops (each (k,) int64, surface on the left)."""
+    n_vertices: int
+    n_faces: int
+    loops: list = field(default_factory=list)
+    euler: int = 0
+
+    @property
+    def boundary(self):
+        """(k,) int64 vertices of the outer (longest) boundary loop, or an empty array."""
+        return self.loops[0] if self.loops else np.zeros(0, np.int64)
+
+
+def _examples(idx, k=5):
+    idx = np.asarray(idx).ravel()[:k].tolist()
+    return ', '.join(str(i) for i in idx)
+
+
+def _plural(n, word):
+    if n == 1:
+        return f"1 {word}"
+    return f"{n} {word[:-1]}ices" if word.endswith('vertex') else f"{n} {word}s"
+
+
+def as_arrays(V, F):
+    """Convert to ``V`` (n,3) float64 and ``F`` (m,3) int64, or raise ``ConformalError``."""
+    try:
+        V = np.asarray(V, dtype=np.float64)
+        F = np.asarray(F, dtype=np.int64)
+    except (TypeError, ValueError) as exc:
+        raise ConformalError(f"mesh arrays are not numeric: {exc}") from None
+    if V.size == 0 or F.size == 0:
+        raise ConformalError("mesh is empty: it has no vertices or no faces")
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ConformalError(f"vertex array must have shape (n,3), got {V.shape}")
+    if F.ndim != 2 or F.shape[1] != 3:
+        raise ConformalError(f"face array must have shape (m,3) triangles, got {F.shape}")
+    return V, F
+
+
+def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False):
+    """Validate a triangle mesh for ``kind`` 'disk' (one boundary loop, Euler characteristic 1),
+    'sphere' (closed, genus 0) or 'surface' (manifold only). Returns ``MeshInfo``."""
+    V, F = as_arrays(V, F)
+    n, m = len(V), len(F)
+    if max_faces is not None and m > max_faces:
+        raise ConformalError(f"mesh has {m:,} triangles, over the limit of {max_faces:,}: "
+                             "decimate it, or raise the size limit")
+    if F.min() < 0 or F.max() >= n:
+        bad = np.nonzero((F < 0).any(1) | (F >= n).any(1))[0]
+        raise ConformalError(f"mesh has {_plural(len(bad), 'face')} that refer to missing vertices "
+                             f"(faces {_examples(bad)}): face indices must lie in 0..{n - 1}")
+    finite = np.isfinite(V).all(axis=1)
+    if not finite.all():
+        bad = np.nonzero(~finite)[0]
+        raise ConformalError(f"mesh has {_plural(len(bad), 'vertex')} with NaN or infinite coordinates "
+                             f"(vertices {_examples(bad)}): fix or delete them")
+    rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+    A = face_areas(V, F)
+    el = np.linalg.norm(V[F[:, 1]] - V[F[:, 0]], axis=1)
+    scale2 = max(float(np.mean(el)) ** 2, np.finfo(float).tiny)
+    zero = rep | (A <= 1e-12 * scale2)
+    if zero.any():
+        bad = np.nonzero(zero)[0]
+        raise ConformalError(f"mesh has {_plural(len(bad), 'zero-area face')} (faces {_examples(bad)}): "
+                             "merge vertices by distance or dissolve degenerate faces")
+    bad = topology.duplicate_rows(F)
+    if len(bad):
+        raise ConformalError(f"mesh has {_plural(len(bad), 'duplicate face')} (faces {_examples(bad)}): "
+                             "delete the duplicate faces (merge by distance)")
+    E, ecount = topology.unique_edges(F)
+    if (ecount > 2).any():
+        bad = E[ecount > 2]
+        ex = ', '.join(f"({a}, {b})" for a, b in bad[:3].tolist())
+        raise ConformalError(f"mesh has {_plural(len(bad), 'non-manifold edge')} shared by 3 or more "
+                             f"faces, e.g. {ex}: select them (Select All by Trait > Non Manifold) and "
+                             "separate or delete faces")
+    H = topology.halfedges(F)
+    hk = H[:, 0] * n + H[:, 1]
+    uh, hc = np.unique(hk, return_counts=True)
+    if (hc > 1).any():
+        k = uh[hc > 1][:3]
+        ex = ', '.join(f"({a}, {b})" for a, b in zip((k // n).tolist(), (k % n).tolist()))
+        raise ConformalError(f"faces are not consistently oriented ({_plural(int((hc > 1).sum()), 'edge')} "
+                             f"run the same way in both faces, e.g. {ex}): recalculate normals")
+    used = np.zeros(n, bool)
+    used[F.ravel()] = True
+    if not used.all() and not allow_loose:
+        bad = np.nonzero(~used)[0]
+        raise ConformalError(f"mesh has {_plural(len(bad), 'loose vertex')} in no face "
+                             f"(vertices {_examples(bad)}): delete loose geometry")
+    fans = topology.vertex_fans(F, n)
+    if (fans > 1).any():
+        bad = np.nonzero(fans > 1)[0]
+        raise ConformalError(f"mesh has {_plural(len(bad), 'non-manifold vertex')} where separate "
+                             f"fans of faces touch (vertices {_examples(bad)}): split or rip them apart")
+    ncomp, _ = topology.face_components(F, n)
+    if ncomp > 1:
+        raise ConformalError(f"mesh has {ncomp} separate parts: flatten one connected piece at a time "
+                             "(separate by loose parts), or flatten the islands one by one")
+    loops = topology.boundary_loops(F, n)
+    chi = topology.euler_characteristic(F)
+    info = MeshInfo(n_vertices=n, n_faces=m, loops=loops, euler=chi)
+    if kind == 'disk':
+        if not loops:
+            raise ConformalError("mesh is closed (it has no boundary): use sphere mode, "
+                                 "or mark a seam that cuts it open")
+        if len(loops) > 1:
+            raise ConformalError(f"mesh has {len(loops)} boundary loops; disk mode needs exactly one: "
+                                 "mark seams or fill holes")
+        if chi != 1:
+            genus = (2 - chi - len(loops)) // 2
+            raise ConformalError(f"mesh has one boundary loop but genus {genus} (Euler characteristic "
+                                 f"{chi}, a disk has 1): mark seams that cut it into a disk")
+    elif kind == 'sphere':
+        if loops:
+            raise ConformalError(f"mesh is open ({_plural(len(loops), 'boundary loop')}); sphere mode "
+                                 "needs a closed mesh: use disk mode, or fill the holes")
+        if chi != 2:
+            genus = (2 - chi) // 2
+            raise ConformalError(f"mesh has genus {genus} (Euler characteristic {chi}); sphere mode needs "
+                                 "genus 0: mark seams and use disk mode")
+    elif kind != 'surface':
+        raise ConformalError(f"unknown mesh kind {kind!r}: use 'disk', 'sphere' or 'surface'")
+    return info
