@@ -5,6 +5,9 @@ in this order and unregistered in reverse."""
 import importlib
 
 MODULES = (
+    'prefs',
+    'ops_flatten',
+    'ui',
 )
 
 

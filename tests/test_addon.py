@@ -1,0 +1,358 @@
+"""The Blender add-on against the real bpy module: registration, the flatten operator's UVs and baked
+attributes against the core, modes, modifiers, and failures that must leave every data array as it was.
+
+Note: ``ed.undo`` cannot run in background mode (its poll fails, checked below), so undo itself is not
+exercised here; the operator's {'REGISTER', 'UNDO'} flags are, and so is the property undo relies on
+for failures: nothing is written unless the whole computation succeeded."""
+import bpy
+import numpy as np
+import pytest
+
+N = 25          # bump grid size: 1152 triangles, fast enough to run every mode
+
+
+def core_of(pkg):
+    from conformal_flatten.core.flatten import flatten
+    from conformal_flatten.core.surfaces import make_surface
+    from conformal_flatten.core.triangulate import triangulate
+    return flatten, make_surface, triangulate
+
+
+def bump_object(bl, n=N, name='bump'):
+    from conformal_flatten.core.surfaces import make_surface
+    V, F = make_surface('bump', n)
+    V = V.astype(np.float32).astype(float)     # what Blender stores
+    return bl.mesh_object(name, V, F), V, F
+
+
+def loop_uv(me):
+    buf = np.empty(len(me.loops) * 2, np.float32)
+    me.uv_layers.active.uv.foreach_get('vector', buf)
+    return buf.reshape(-1, 2).astype(float)
+
+
+def corner_verts(me):
+    buf = np.empty(len(me.loops), np.int32)
+    me.attributes['.corner_vert'].data.foreach_get('value', buf)
+    return buf.astype(np.int64)
+
+
+def sizes_of(me):
+    buf = np.empty(len(me.polygons), np.int32)
+    me.polygons.foreach_get('loop_total', buf)
+    return buf.astype(np.int64)
+
+
+def point_attr(me, name, field, width):
+    a = me.attributes[name]
+    buf = np.empty(len(a.data) * width, np.float32)
+    a.data.foreach_get(field, buf)
+    return buf.reshape(-1, width) if width > 1 else buf
+
+
+def quad_ngon_mesh():
+    """A 5x5-vertex grid of quads whose central 2x2 block of quads is one octagon (centre vertex
+    removed, then unused vertices dropped), lifted into a bump. Polygons counter-clockwise."""
+    n = 5
+    t = np.linspace(-1, 1, n)
+    X, Y = np.meshgrid(t, t)
+    V = np.stack([X.ravel(), Y.ravel(), 0.4 * np.exp(-(X**2 + Y**2)).ravel()], 1)
+    idx = lambda i, j: i * n + j
+    polys = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            if 1 <= i <= 2 and 1 <= j <= 2:
+                continue
+            polys.append([idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j)])
+    ring = [idx(1, 1), idx(1, 2), idx(1, 3), idx(2, 3), idx(3, 3), idx(3, 2), idx(3, 1), idx(2, 1)]
+    polys.append(ring)
+    centre = idx(2, 2)
+    keep = np.ones(len(V), bool)
+    keep[centre] = False
+    remap = np.cumsum(keep) - 1
+    return V[keep].astype(np.float32).astype(float), [[int(remap[v]) for v in p] for p in polys]
+
+
+# --- registration --------------------------------------------------------------------------------
+def test_register_unregister_twice(blank_blender):
+    pkg = blank_blender
+    from conformal_flatten.addon import ops_flatten
+    for _ in range(2):
+        pkg.register()
+        assert hasattr(bpy.types, 'UV_OT_conformal_flatten')
+        assert hasattr(bpy.types, 'VIEW3D_PT_conformal_flatten')
+        assert hasattr(bpy.types, 'IMAGE_PT_conformal_flatten')
+        assert hasattr(bpy.types.Scene, 'conformal_flatten')
+        assert ops_flatten.menu_unwrap in bpy.types.IMAGE_MT_uvs_unwrap._dyn_ui_initialize()
+        pkg.unregister()
+        assert not hasattr(bpy.types, 'UV_OT_conformal_flatten')
+        assert not hasattr(bpy.types, 'VIEW3D_PT_conformal_flatten')
+        assert not hasattr(bpy.types.Scene, 'conformal_flatten')
+        assert ops_flatten.menu_unwrap not in bpy.types.IMAGE_MT_uvs_unwrap._dyn_ui_initialize()
+
+
+def test_operator_flags(addon):
+    assert bpy.types.UV_OT_conformal_flatten.bl_options == {'REGISTER', 'UNDO'}
+    assert bpy.ops.uv.conformal_flatten.bl_options == {'REGISTER', 'UNDO'}
+    props = bpy.ops.uv.conformal_flatten.get_rna_type().properties
+    assert {i.identifier for i in props['boundary'].enum_items} == {'UNIFORM', 'AREA', 'FREE'}
+    assert {i.identifier for i in props['fit'].enum_items} == {'UNIT_SQUARE', 'TRUE_SCALE'}
+    assert props['bake'].default is True
+
+
+def test_undo_not_runnable_headless(addon):
+    # Documented limitation (DESIGN.md section 9): undo needs a GUI session, so it is not tested here.
+    assert bpy.app.background
+    assert not bpy.ops.ed.undo.poll()
+
+
+# --- results against the core --------------------------------------------------------------------
+@pytest.mark.parametrize('boundary', ['AREA', 'FREE', 'UNIFORM'])
+def test_bump_uvs_match_core(addon, bl, boundary):
+    flatten, _, _ = core_of(addon)
+    obj, V, F = bump_object(bl)
+    assert not obj.data.uv_layers                 # "UVMap" must be created
+    assert bpy.ops.uv.conformal_flatten(boundary=boundary, fit='UNIT_SQUARE') == {'FINISHED'}
+    me = obj.data
+    assert me.uv_layers.active.name == 'UVMap'
+    ref = flatten(V, F, boundary=boundary.lower(), fit='unit_square')
+    np.testing.assert_allclose(loop_uv(me), ref.uv[corner_verts(me)], atol=2e-6)
+    rep = addon.addon.meshio.load_report(me, 'conformal_flatten_report')
+    assert rep['flips'] == 0 == ref.report['flips']
+    assert rep['mu_ratio'] == pytest.approx(ref.report['mu_ratio'], rel=1e-12)
+    uv = loop_uv(me)
+    assert uv.min() >= -1e-6 and uv.max() <= 1 + 1e-6
+
+
+def test_true_scale_area(addon, bl):
+    from conformal_flatten.core.geometry import face_areas
+    obj, V, F = bump_object(bl)
+    bpy.ops.uv.conformal_flatten(boundary='AREA', fit='TRUE_SCALE', bake=False)
+    me = obj.data
+    W = loop_uv(me)
+    cv = corner_verts(me)
+    UVv = np.zeros((len(V), 2))
+    UVv[cv] = W
+    e1, e2 = UVv[F[:, 1]] - UVv[F[:, 0]], UVv[F[:, 2]] - UVv[F[:, 0]]
+    a_uv = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    assert (a_uv > 0).all()
+    assert a_uv.sum() == pytest.approx(face_areas(V, F).sum(), rel=1e-5)
+    assert 'conformal_factor' not in me.attributes        # bake=False writes no attributes
+
+
+def test_quads_and_ngon(addon, bl):
+    flatten, _, triangulate = core_of(addon)
+    V, polys = quad_ngon_mesh()
+    obj = bl.mesh_object('qn', V, polys)
+    me = obj.data
+    n_poly, sizes_before = len(me.polygons), sizes_of(me)
+    assert sorted(set(sizes_before.tolist())) == [4, 8]
+    bpy.ops.uv.conformal_flatten(boundary='AREA', fit='UNIT_SQUARE')
+    assert len(me.polygons) == n_poly                          # the n-gon keeps its face
+    np.testing.assert_array_equal(sizes_of(me), sizes_before)
+    cv = corner_verts(me)
+    tri, _ = triangulate(cv, sizes_before, V)
+    ref = flatten(V, cv[tri], boundary='area', fit='unit_square')
+    W = loop_uv(me)
+    np.testing.assert_allclose(W, ref.uv[cv], atol=2e-6)
+    # every polygon, the octagon included, is counter-clockwise (positive signed area) in UV
+    start = np.r_[0, np.cumsum(sizes_before)[:-1]]
+    for s, k in zip(start, sizes_before):
+        P = W[s:s + k]
+        area = 0.5 * np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1])
+        assert area > 0
+    # one UV per vertex: corners of the same vertex share their UV (no seams on a disk)
+    for v in range(len(V)):
+        assert np.ptp(W[cv == v], axis=0).max() < 1e-7
+
+
+def test_attributes_domain_type_range(addon, bl):
+    from conformal_flatten.addon.colormap import colormap
+    from conformal_flatten.core.geometry import face_areas
+    obj, V, F = bump_object(bl)
+    bpy.ops.uv.conformal_flatten(boundary='AREA')
+    me = obj.data
+    a = me.attributes['conformal_factor']
+    assert (a.domain, a.data_type) == ('POINT', 'FLOAT')
+    c = me.attributes['conformal_factor_color']
+    assert (c.domain, c.data_type) == ('POINT', 'FLOAT_COLOR')
+    assert me.color_attributes.active_color_name == 'conformal_factor_color'
+    mu = point_attr(me, 'conformal_factor', 'value', 1)
+    lo, hi = me['conformal_factor_range']
+    assert mu.min() == pytest.approx(lo, rel=1e-6) and mu.max() == pytest.approx(hi, rel=1e-6)
+    assert 0.5 < lo < 1 < hi < 2                       # mu is normalised: total UV area = 3D area
+    rep = addon.addon.meshio.load_report(me, 'conformal_flatten_report')
+    assert rep['conformal_factor_range'] == pytest.approx([lo, hi])
+    # independent check: vertex mu^2 = (UV area / 3D area of the vertex star) / (total ratio)
+    cv = corner_verts(me)
+    UVv = np.zeros((len(V), 2))
+    UVv[cv] = loop_uv(me)
+    e1, e2 = UVv[F[:, 1]] - UVv[F[:, 0]], UVv[F[:, 2]] - UVv[F[:, 0]]
+    a_uv = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    a_3d = face_areas(V, F)
+    star_uv = np.bincount(F.ravel(), np.repeat(a_uv, 3), minlength=len(V))
+    star_3d = np.bincount(F.ravel(), np.repeat(a_3d, 3), minlength=len(V))
+    expect = np.sqrt(star_uv / star_3d / (a_uv.sum() / a_3d.sum()))
+    np.testing.assert_allclose(mu, expect, rtol=1e-4)
+    # colours: in [0,1], the extremes get the ends of the colour map
+    col = point_attr(me, 'conformal_factor_color', 'color', 4)
+    assert col.min() >= 0 and col.max() <= 1
+    np.testing.assert_allclose(col[np.argmin(mu)], colormap([0.0])[0], atol=1e-5)
+    np.testing.assert_allclose(col[np.argmax(mu)], colormap([1.0])[0], atol=1e-5)
+
+
+def test_colormap_preference(addon, bl):
+    from conformal_flatten.addon.prefs import get_prefs
+    prefs = get_prefs(bpy.context)
+    assert prefs.grid_size == 0 and prefs.colormap == 'PERCEPTUAL'
+    prefs.colormap = 'GRAY'
+    obj, _, _ = bump_object(bl)
+    bpy.ops.uv.conformal_flatten(boundary='AREA')
+    col = point_attr(obj.data, 'conformal_factor_color', 'color', 4)
+    np.testing.assert_allclose(col[:, 0], col[:, 1], atol=1e-4)
+    np.testing.assert_allclose(col[:, 1], col[:, 2], atol=1e-4)
+    assert col[:, 0].max() > 0.9 and col[:, 0].min() < 0.05
+
+
+def test_existing_attribute_of_other_type_is_replaced(addon, bl):
+    obj, _, _ = bump_object(bl)
+    me = obj.data
+    me.attributes.new('conformal_factor', 'INT', 'CORNER')
+    me.uv_layers.new(name='Mine')
+    me.uv_layers.new(name='Other')
+    me.uv_layers.active = me.uv_layers['Mine']
+    other_before = np.empty(len(me.loops) * 2, np.float32)
+    me.uv_layers['Other'].uv.foreach_get('vector', other_before)
+    bpy.ops.uv.conformal_flatten(boundary='AREA')
+    a = me.attributes['conformal_factor']
+    assert (a.domain, a.data_type) == ('POINT', 'FLOAT')
+    assert [u.name for u in me.uv_layers] == ['Mine', 'Other']   # writes into the active map
+    other = np.empty(len(me.loops) * 2, np.float32)
+    me.uv_layers['Other'].uv.foreach_get('vector', other)
+    np.testing.assert_array_equal(other, other_before)           # the other map is untouched
+    assert np.ptp(loop_uv(me)) > 0.5
+
+
+def test_edit_mode_keeps_mode_and_selection(addon, bl):
+    import bmesh
+    obj, V, F = bump_object(bl)
+    me = obj.data
+    bpy.ops.object.mode_set(mode='EDIT')
+    bpy.context.tool_settings.mesh_select_mode = (True, False, False)
+    bm = bmesh.from_edit_mesh(me)
+    for v in bm.verts:
+        v.select_set(v.index % 7 == 0)
+    bm.select_flush_mode()
+    bmesh.update_edit_mesh(me)
+    # an edit made in Edit mode and not yet written to the mesh must be seen by the operator
+    bm.verts.ensure_lookup_table()
+    bm.verts[len(V) // 2].co.z += 0.25
+    bmesh.update_edit_mesh(me)
+    assert bpy.ops.uv.conformal_flatten(boundary='AREA') == {'FINISHED'}
+    assert obj.mode == 'EDIT'
+    bpy.ops.object.mode_set(mode='OBJECT')
+    sel = np.zeros(len(me.vertices), bool)
+    me.attributes['.select_vert'].data.foreach_get('value', sel)
+    np.testing.assert_array_equal(sel, np.arange(len(V)) % 7 == 0)
+    assert tuple(bpy.context.tool_settings.mesh_select_mode) == (True, False, False)
+    flatten, _, _ = core_of(addon)
+    V2 = V.copy()
+    V2[len(V) // 2, 2] += 0.25
+    ref = flatten(V2, F, boundary='area', fit='unit_square')
+    np.testing.assert_allclose(loop_uv(me), ref.uv[corner_verts(me)], atol=2e-6)
+
+
+def test_modifiers_ignored(addon, bl):
+    obj, V, F = bump_object(bl)
+    obj.modifiers.new('sub', 'SUBSURF').levels = 1
+    obj.modifiers.new('disp', 'DISPLACE').strength = 0.3
+    bpy.ops.uv.conformal_flatten(boundary='AREA')
+    me = obj.data
+    assert len(me.vertices) == len(V)
+    flatten, _, _ = core_of(addon)
+    ref = flatten(V, F, boundary='area', fit='unit_square')
+    np.testing.assert_allclose(loop_uv(me), ref.uv[corner_verts(me)], atol=2e-6)
+    assert len(obj.modifiers) == 2
+
+
+# --- failures leave everything unchanged ---------------------------------------------------------
+def _annulus():
+    """A 9x9 grid with the central 3x3 block of quads removed: two boundary loops."""
+    n = 9
+    t = np.linspace(-1, 1, n)
+    X, Y = np.meshgrid(t, t)
+    V = np.stack([X.ravel(), Y.ravel(), 0.2 * (X**2 - Y**2).ravel()], 1)
+    polys = [[i * n + j, i * n + j + 1, (i + 1) * n + j + 1, (i + 1) * n + j]
+             for i in range(n - 1) for j in range(n - 1) if not (3 <= i <= 5 and 3 <= j <= 5)]
+    used = np.zeros(len(V), bool)
+    used[np.concatenate(polys)] = True                   # drop the vertices inside the hole
+    remap = np.cumsum(used) - 1
+    return V[used], [[int(remap[v]) for v in p] for p in polys]
+
+
+def _fails_unchanged(bl, match, mode='OBJECT'):
+    """The operator raises RuntimeError (its ERROR report) matching ``match``, keeps the mode, and
+    every mesh's data arrays are bitwise what they were."""
+    obj = bpy.context.view_layer.objects.active
+    if mode == 'EDIT':       # a round trip first, so that 'before' is what Edit mode writes back
+        bpy.ops.object.mode_set(mode='EDIT')
+        bpy.ops.object.mode_set(mode='OBJECT')
+    before = bl.all_meshes_snapshot()
+    if mode == 'EDIT':
+        bpy.ops.object.mode_set(mode='EDIT')
+    with pytest.raises(RuntimeError, match=match):
+        bpy.ops.uv.conformal_flatten(boundary='AREA')
+    if obj is not None:
+        assert obj.mode == mode
+    if mode == 'EDIT':
+        bpy.ops.object.mode_set(mode='OBJECT')
+    after = bl.all_meshes_snapshot()
+    assert before.keys() == after.keys()
+    for name in before:
+        bl.assert_same(before[name], after[name])
+
+
+@pytest.mark.parametrize('mode', ['OBJECT', 'EDIT'])
+def test_closed_mesh_fails_unchanged(addon, bl, mode):
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
+    bpy.context.object.data.uv_layers.active.uv.foreach_set('vector', np.full(
+        2 * len(bpy.context.object.data.loops), 0.25, np.float32))
+    _fails_unchanged(bl, 'closed', mode)
+
+
+def test_two_boundary_loops_fail_unchanged(addon, bl):
+    V, polys = _annulus()
+    obj = bl.mesh_object('annulus', V, polys)
+    obj.data.uv_layers.new(name='UVMap')
+    obj.data.attributes.new('conformal_factor', 'FLOAT', 'POINT').data.foreach_set(
+        'value', np.linspace(0, 1, len(V), dtype=np.float32))
+    obj.data['conformal_factor_range'] = [0.0, 1.0]
+    _fails_unchanged(bl, '2 boundary loops')
+
+
+def test_non_mesh_object_fails_unchanged(addon, bl):
+    bump_object(bl)                    # a mesh in the scene that must stay untouched
+    bpy.ops.curve.primitive_bezier_curve_add()
+    curve = bpy.context.object
+    pts = [tuple(p.co) for p in curve.data.splines[0].bezier_points]
+    _fails_unchanged(bl, 'not a mesh')
+    assert [tuple(p.co) for p in curve.data.splines[0].bezier_points] == pts
+
+
+def test_no_active_object_fails(addon, bl):
+    bump_object(bl)
+    bpy.context.view_layer.objects.active = None
+    _fails_unchanged(bl, 'no active object')
+
+
+def test_report_and_summary(addon, bl):
+    from conformal_flatten.addon import ops_flatten, ui
+    obj, _, _ = bump_object(bl)
+    bpy.ops.uv.conformal_flatten(boundary='UNIFORM')
+    rep = addon.addon.meshio.load_report(obj.data, ops_flatten.REPORT_KEY)
+    for key in ('mu_ratio', 'bound_vertex', 'flips', 'qc_mean', 'seconds', 'mesh_hash'):
+        assert rep[key] is not None, key
+    assert rep['bound_vertex'] >= rep['mu_ratio'] * 0.98
+    line = ops_flatten.summary_line(rep)
+    assert 'mu ratio' in line and 'certified bound' in line and 'flips' in line
+    assert ui.geodesic_solver_label()
