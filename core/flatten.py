@@ -1,5 +1,11 @@
 """Conformal flattening of a disk with boundary scale factors (DESIGN.md section 2).
 
+Sign convention: ``u = log mu`` is the log of the local scale (UV length per surface length). With
+the positive semidefinite ``L`` the flat-target Yamabe equation reads ``L u = -Omega`` inside and the
+target boundary curvature is ``k~ = k + (L u)_B``. DESIGN.md section 2 writes steps 2-3 for ``-u``;
+the two agree for ``u_B = 0`` and the certified bound is the same, but the lengths
+``l~ = exp((u_i + u_j)/2) l`` need ``u = log mu``.
+
 The construction follows Boundary First Flattening: choose boundary log scale factors ``u_B``, solve
 the discrete Yamabe equation for the interior, build the boundary curve with the target curvature and
 lengths, and extend it conformally (x harmonic, y its conjugate harmonic). Boundary modes:
@@ -23,6 +29,7 @@ from .validate import check_mesh, DEFAULT_MAX_FACES
 
 BOUNDARY_MODES = ('free', 'area', 'uniform')
 FIT_MODES = ('true_scale', 'unit_square')
+AUTO_BOUND_FACES = 60_000      # above this the certified bound is computed only on request
 
 
 @dataclass
@@ -72,10 +79,11 @@ class DiskSystem:
         return self._II.solve(b)
 
     def yamabe(self, uB):
-        """Per-vertex ``u`` (n,) with boundary values ``uB`` (nb,): ``L_II u_I = Omega_I - L_IB u_B``."""
+        """Per-vertex log scale ``u = log mu`` (n,) with boundary values ``uB`` (nb,):
+        ``L_II u_I = -Omega_I - L_IB u_B`` (flat interior: ``Omega~ = Omega + L u = 0``)."""
         u = np.zeros(self.n)
         u[self.B] = uB
-        u[self.I] = self.solve_II(self.Omega[self.I] - self.L_IB @ uB)
+        u[self.I] = self.solve_II(-self.Omega[self.I] - self.L_IB @ uB)
         return u
 
     def harmonic(self, fB):
@@ -87,10 +95,10 @@ class DiskSystem:
 
     # --- steps 3-4: the boundary curve ---------------------------------------------------------
     def boundary_curve(self, u):
-        """Closed boundary polygon (nb,2) with turning angles ``k~ = k - (L u)_B`` and lengths closest
+        """Closed boundary polygon (nb,2) with turning angles ``k~ = k + (L u)_B`` and lengths closest
         to ``l~ = exp((u_i + u_j)/2) l`` in the weighted least-squares sense."""
         uB = u[self.B]
-        kt = self.k - (self.L @ u)[self.B]
+        kt = self.k + (self.L @ u)[self.B]
         if abs(kt.sum() - 2 * np.pi) > 1e-6 * max(1.0, np.abs(kt).sum()):
             raise ConformalError(f"target boundary curvature sums to {kt.sum():.6f}, not 2*pi: "
                                  "the mesh is not a topological disk")
@@ -206,7 +214,7 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
         report.update(opt)
     timings['solve'] = time.perf_counter() - t
     if bound is None:
-        bound = boundary == 'uniform'
+        bound = boundary == 'uniform' and len(F) <= AUTO_BOUND_FACES
     if bound:
         from .uniform import vertex_bound
         t = time.perf_counter()

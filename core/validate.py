@@ -51,9 +51,10 @@ def as_arrays(V, F):
     return V, F
 
 
-def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False):
+def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False, allow_parts=False):
     """Validate a triangle mesh for ``kind`` 'disk' (one boundary loop, Euler characteristic 1),
-    'sphere' (closed, genus 0) or 'surface' (manifold only). Returns ``MeshInfo``."""
+    'sphere' (closed, genus 0) or 'surface' (manifold only). ``allow_parts`` (only with 'surface')
+    accepts several connected pieces. Returns ``MeshInfo``."""
     V, F = as_arrays(V, F)
     n, m = len(V), len(F)
     if max_faces is not None and m > max_faces:
@@ -108,7 +109,7 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
         raise ConformalError(f"mesh has {_plural(len(bad), 'non-manifold vertex')} where separate "
                              f"fans of faces touch (vertices {_examples(bad)}): split or rip them apart")
     ncomp, _ = topology.face_components(F, n)
-    if ncomp > 1:
+    if ncomp > 1 and not (allow_parts and kind == 'surface'):
         raise ConformalError(f"mesh has {ncomp} separate parts: flatten one connected piece at a time "
                              "(separate by loose parts), or flatten the islands one by one")
     loops = topology.boundary_loops(F, n)
@@ -136,3 +137,20 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
     elif kind != 'surface':
         raise ConformalError(f"unknown mesh kind {kind!r}: use 'disk', 'sphere' or 'surface'")
     return info
+
+
+def check_loose_edges(E, F):
+    """Raise ``ConformalError`` if any edge of ``E`` (k,2) int (all edges of the mesh, as Blender or
+    an OBJ ``l`` line gives them) belongs to no triangle of ``F`` (m,3)."""
+    E = np.asarray(E, dtype=np.int64).reshape(-1, 2)
+    if len(E) == 0:
+        return
+    F = np.asarray(F, dtype=np.int64)
+    n = int(max(E.max(), F.max() if F.size else 0)) + 1
+    H = np.sort(topology.halfedges(F), axis=1) if F.size else np.zeros((0, 2), np.int64)
+    used = np.isin(np.sort(E, axis=1) @ np.array([n, 1]), H @ np.array([n, 1]))
+    if not used.all():
+        bad = np.nonzero(~used)[0]
+        ex = ', '.join(f"({a}, {b})" for a, b in E[bad[:3]].tolist())
+        raise ConformalError(f"mesh has {_plural(len(bad), 'loose edge')} in no face, e.g. {ex}: "
+                             "delete loose geometry (Select All by Trait > Loose Geometry)")

@@ -1,0 +1,189 @@
+"""The ``uniform`` boundary mode: boundary scale factors for the most uniform conformal factor.
+
+The paper's objective is to maximise ``min mu / max mu``. In the log scale ``u`` this is: minimise
+``max(u) - min(u)`` over the boundary values ``u_B``, with the interior given by the Yamabe equation
+``L_II u_I = Omega_I - L_IB u_B`` (DESIGN.md section 2). Because ``u = u0 + harmonic(u_B)`` is affine in
+``u_B``, the vertex-level problem is a linear program; ``vertex_bound`` solves it exactly (active set
+over the interior vertices) and reports the certified optimum.
+
+The realised per-triangle ratio of the final map is what matters, and a raw LP optimum is jagged along
+the boundary. ``optimise`` therefore works in a smooth, low-dimensional basis of ``u_B`` (Fourier modes
+of the boundary arc length, which are the eigenvectors of the boundary loop's Laplacian for uniform
+spacing) and runs a sequential linear program on the *realised* per-triangle log scale
+``s_T = 0.5 log(A_uv / A_3d)``: each step linearises ``s_T`` through the vertex response
+``H = harmonic(Phi)`` averaged over each triangle, solves the min-max LP inside a trust region, builds
+the map (boundary curve, harmonic x, conjugate y) and keeps the step only if the realised ratio
+improves with no flipped triangle and conformality inside the budget. Every step costs one multi-RHS
+solve with the prefactored ``L_II`` and one with the Neumann Laplacian.
+"""
+import numpy as np
+from scipy.optimize import linprog
+import scipy.sparse as sp
+
+from .errors import ConformalError
+from .measures import jacobians, singular_values
+
+
+def _qc_mean(system, uv):
+    J, A = jacobians(system.V, system.F, uv)
+    s = singular_values(J)
+    qc = s[:, 0] / np.maximum(s[:, 1], np.finfo(float).tiny)
+    return float((qc * A).sum() / A.sum())
+
+
+def _face_log_scale(system, uv):
+    W = uv[system.F]
+    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+    a = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    if not np.all(a > 0):
+        return None
+    return 0.5 * np.log(a / system.A)
+
+
+def boundary_basis(system, n_freq):
+    """Smooth basis ``Phi`` (nb, 2*n_freq) of boundary functions: cos and sin of 2 pi k s / S for
+    k = 1..n_freq, with s the arc length along the boundary loop and S its length. Each column has
+    max |value| 1. The constant is left out: it only rescales the whole map."""
+    l = system.l
+    s = np.r_[0.0, np.cumsum(l[:-1])] / l.sum()
+    k = np.arange(1, n_freq + 1)
+    ang = 2 * np.pi * s[:, None] * k[None, :]
+    return np.concatenate([np.cos(ang), np.sin(ang)], axis=1), np.r_[k, k].astype(float)
+
+
+def _minmax_lp(s, J, c, delta, reg_w):
+    """Solve min (t1 - t0) + reg . |a - c| s.t. t0 <= s + J (a - c) <= t1, |a - c| <= delta.
+    s (r,), J (r,K), c (K,). Variables: d+ (K), d- (K) in [0, delta], t1, t0, with a = c + d+ - d-.
+    Returns (a (K,), predicted spread) or (None, None)."""
+    r, K = J.shape
+    one = np.ones((r, 1))
+    zero = np.zeros((r, 1))
+    A_ub = np.vstack([np.hstack([J, -J, -one, zero]), np.hstack([-J, J, zero, one])])
+    b_ub = np.r_[-s, s]
+    cost = np.r_[reg_w, reg_w, 1.0, -1.0]
+    bounds = [(0, delta)] * (2 * K) + [(None, None)] * 2
+    res = linprog(cost, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method='highs-ds')
+    if res.status != 0:
+        return None, None
+    return c + res.x[:K] - res.x[K:2 * K], res.x[2 * K] - res.x[2 * K + 1]
+
+
+def optimise(system, n_freq=None, max_iter=40, qc_slack=None, active=200, reg=1e-3, progress=None):
+    """Maximise the realised ``min mu / max mu`` over smooth boundary scale factors.
+
+    system: ``DiskSystem``. n_freq: Fourier modes of u_B (default grows with the boundary length, at
+    most 24). qc_slack: allowed rise of the area-weighted mean quasi-conformal distortion over the
+    ``area`` map (default: half its excess over 1, at least 0.002). active: faces per side kept in each
+    LP. reg: weight of the smoothness term (per unit of |coefficient| times frequency).
+    Returns ``u`` (n,), ``uv`` (n,2) and a dict for the report."""
+    progress = progress or (lambda f, msg: None)
+    nb = len(system.B)
+    if n_freq is None:
+        n_freq = int(np.clip(nb // 8, 1, 24))
+    Phi, freq = boundary_basis(system, n_freq)
+    u0 = system.yamabe(np.zeros(nb))
+    uv0 = system.map_from_u(u0)
+    s0 = _face_log_scale(system, uv0)
+    if s0 is None:
+        raise ConformalError("the area-preserving map already folds: the mesh has triangles too "
+                             "degenerate to flatten; clean it up (merge by distance, dissolve degenerate)")
+    qc0 = _qc_mean(system, uv0)
+    if qc_slack is None:
+        qc_slack = max(0.5 * (qc0 - 1.0), 0.002)
+    qc_budget = qc0 + qc_slack
+    H = system.harmonic(Phi)                          # (n, K): response of u to the coefficients
+    JF = H[system.F].mean(axis=1)                     # (m, K): linear model of s_T
+    c = np.zeros(Phi.shape[1])
+    best = dict(c=c, u=u0, uv=uv0, s=s0, spread=float(s0.max() - s0.min()), qc=qc0)
+    delta = 0.5 * best['spread'] + 1e-3
+    reg_w = reg * best['spread'] * freq
+    it, accepted = 0, 0
+    for it in range(1, max_iter + 1):
+        progress(0.1 + 0.8 * it / max_iter, f'optimising boundary scale ({it})')
+        s = best['s']
+        m = len(s)
+        k = min(active, m)
+        order = np.argsort(s)
+        rows = np.unique(np.r_[order[:k], order[-k:]])
+        a, predicted = _minmax_lp(s[rows], JF[rows], best['c'], delta, reg_w)
+        if a is None or best['spread'] - predicted < 1e-5:
+            break
+        u = u0 + H @ a
+        try:
+            uv = system.map_from_u(u)
+        except ConformalError:
+            uv = None
+        s_new = _face_log_scale(system, uv) if uv is not None else None
+        ok = False
+        if s_new is not None:
+            spread = float(s_new.max() - s_new.min())
+            if spread < best['spread'] - 1e-6:
+                qc = _qc_mean(system, uv)
+                if qc <= qc_budget:
+                    best = dict(c=a, u=u, uv=uv, s=s_new, spread=spread, qc=qc)
+                    ok = True
+        if ok:
+            accepted += 1
+            delta *= 1.5
+        else:
+            delta *= 0.4
+        if delta < 1e-4:
+            break
+    opt = {
+        'ratio_area_mode': float(np.exp(-(s0.max() - s0.min()))),
+        'iterations': it,
+        'accepted_steps': accepted,
+        'basis_size': int(Phi.shape[1]),
+        'qc_budget': round(qc_budget, 5),
+    }
+    return best['u'], best['uv'], opt
+
+
+def vertex_bound(system, tol=1e-9, batch=64, max_rounds=50):
+    """Certified vertex-level optimum: the ratio ``exp(-(max u - min u))`` at the best ``u_B`` over all
+    boundary values (the linear program of DESIGN.md section 2). Active set over interior vertices:
+    rows of ``-L_II^-1 L_IB`` are added for the vertices that violate the current bounds."""
+    nb, nI = len(system.B), len(system.I)
+    u0 = system.yamabe(np.zeros(nb))
+    if nI == 0:
+        return 1.0
+    uI = u0[system.I]
+    order = np.argsort(uI)
+    R = np.unique(np.r_[order[:batch], order[-batch:]])
+    rows = _response_rows(system, R)
+    for _ in range(max_rounds):
+        K = len(R)
+        # variables uB (nb), t1, t0; minimise t1 - t0
+        Ib = sp.identity(nb, format='csr')
+        one_b = np.ones((nb, 1))
+        one_r = np.ones((K, 1))
+        A_ub = sp.vstack([
+            sp.hstack([Ib, -one_b, np.zeros((nb, 1))]),
+            sp.hstack([-Ib, np.zeros((nb, 1)), one_b]),
+            sp.hstack([sp.csr_matrix(rows), -one_r, np.zeros((K, 1))]),
+            sp.hstack([sp.csr_matrix(-rows), np.zeros((K, 1)), one_r]),
+        ]).tocsr()
+        b_ub = np.r_[np.zeros(2 * nb), -uI[R], uI[R]]
+        cost = np.r_[np.zeros(nb), 1.0, -1.0]
+        res = linprog(cost, A_ub=A_ub, b_ub=b_ub, bounds=[(None, None)] * (nb + 2), method='highs')
+        if res.status != 0:
+            raise ConformalError(f"the bound's linear program failed: {res.message}")
+        uB, t1, t0 = res.x[:nb], res.x[nb], res.x[nb + 1]
+        u = system.yamabe(uB)[system.I]
+        viol = np.maximum(u - t1, t0 - u)
+        cand = np.setdiff1d(np.nonzero(viol > tol * max(1.0, t1 - t0))[0], R)
+        if len(cand) == 0:
+            return float(np.exp(-(t1 - t0)))
+        cand = cand[np.argsort(-viol[cand])[:batch]]
+        R = np.r_[R, cand]
+        rows = np.vstack([rows, _response_rows(system, cand)])
+    return float(np.exp(-(t1 - t0)))
+
+
+def _response_rows(system, R):
+    """Rows ``R`` of the interior response ``-L_II^-1 L_IB`` (|R|, nb), via |R| solves with the
+    symmetric ``L_II``."""
+    E = np.zeros((len(system.I), len(R)))
+    E[R, np.arange(len(R))] = 1.0
+    Z = system.solve_II(E)
+    return -(system.L_IB.T @ Z).T

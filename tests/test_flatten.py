@@ -1,0 +1,158 @@
+"""Disk flattening (DESIGN.md sections 2, 3, 8): thresholds, conformality, isometry, invariance."""
+import os
+
+import numpy as np
+import pytest
+
+from core import ConformalError, flatten, make_surface, uv_measures
+from core.objio import read_obj
+from conftest import DATA
+
+# issue 2 acceptance floors at n = 65: (mu_ratio floor, qc_mean ceiling). The mu floors are also above
+# Blender's Angle Based unwrap (0.858, 0.352, 0.114, 0.171, 0.593).
+FLOORS = {
+    'bump': (0.870, 1.008),
+    'bump3': (0.373, 1.022),
+    'edgebump': (0.130, 1.038),
+    'ridge': (0.172, 1.029),
+    'saddle': (0.657, 1.017),
+}
+
+
+@pytest.fixture(scope='module')
+def uniform_results():
+    out = {}
+    for name in FLOORS:
+        V, F = make_surface(name, 65)
+        out[name] = (V, F, flatten(V, F, boundary='uniform'))
+    return out
+
+
+@pytest.mark.parametrize('name', list(FLOORS))
+def test_uniform_meets_floors(uniform_results, name):
+    V, F, res = uniform_results[name]
+    r = res.report
+    floor, qc_ceiling = FLOORS[name]
+    assert r['flips'] == 0
+    assert r['mu_ratio'] >= floor
+    assert r['qc_mean'] <= qc_ceiling
+    # the certificate is reported and is a real LP value
+    assert 0 < r['bound_vertex'] <= 1
+    # independent recomputation of the measures from the returned UVs
+    m = uv_measures(V, F, res.uv)
+    assert m['flips'] == 0 and abs(m['mu_ratio'] - r['mu_ratio']) < 1e-9
+
+
+@pytest.mark.parametrize('name', ['edgebump', 'ridge'])
+def test_uniform_beats_area_where_curvature_meets_boundary(uniform_results, name):
+    V, F, res = uniform_results[name]
+    area = flatten(V, F, boundary='area', bound=False).report
+    assert res.report['mu_ratio'] > area['mu_ratio'] + 0.005
+    assert res.report['qc_mean'] <= area['qc_mean'] + 0.01
+
+
+def test_bound_is_certified_on_vertex_u(uniform_results):
+    # no vertex-level u can beat the LP optimum: check the area map's vertex ratio is below it
+    for name, (V, F, res) in uniform_results.items():
+        area = flatten(V, F, boundary='area', bound=False).report
+        assert area['vertex_ratio'] <= res.report['bound_vertex'] + 1e-9
+
+
+@pytest.mark.parametrize('mode', ['free', 'area', 'uniform'])
+def test_modes_orientation_and_scale(mode):
+    V, F = make_surface('bump3', 25)
+    res = flatten(V, F, boundary=mode)
+    W = res.uv[F]
+    signed = (W[:, 1, 0] - W[:, 0, 0]) * (W[:, 2, 1] - W[:, 0, 1]) - \
+             (W[:, 1, 1] - W[:, 0, 1]) * (W[:, 2, 0] - W[:, 0, 0])
+    assert (signed > 0).all()                           # counter-clockwise like the faces
+    P = V[F]
+    area3d = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1).sum()
+    assert abs(0.5 * signed.sum() - area3d) < 1e-9 * area3d     # true scale
+    assert res.mu.shape == (len(F),)
+    sq = flatten(V, F, boundary=mode, fit='unit_square').uv
+    assert sq.min() >= -1e-12 and sq.max() <= 1 + 1e-12
+    assert abs((sq.max(0) - sq.min(0)).max() - 1) < 1e-12
+
+
+@pytest.mark.parametrize('mode', ['free', 'area', 'uniform'])
+def test_flat_meshes_map_isometrically(mode):
+    mesh = read_obj(os.path.join(DATA, 'woody.obj'))
+    F, _ = mesh.triangles()
+    V = mesh.V.copy()
+    # tilt the planar mesh out of the xy plane: still flat
+    R = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))[0]
+    V = V @ R.T
+    res = flatten(V, F, boundary=mode)
+    E = np.r_[F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]
+    l3 = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    l2 = np.linalg.norm(res.uv[E[:, 0]] - res.uv[E[:, 1]], axis=1)
+    assert np.abs(l2 / l3 - 1).max() < 1e-6
+    assert res.report['mu_ratio'] > 1 - 1e-6 and res.report['qc_max'] < 1 + 1e-6
+
+
+def test_planar_public_meshes():
+    for name in ('woody.obj', 'alligator.obj'):
+        mesh = read_obj(os.path.join(DATA, name))
+        F, _ = mesh.triangles()
+        r = flatten(mesh.V, F, boundary='uniform').report
+        assert r['flips'] == 0 and r['mu_ratio'] > 0.999 and r['qc_mean'] < 1.001
+
+
+@pytest.mark.parametrize('mode', ['free', 'area', 'uniform'])
+def test_invariance_to_rigid_motion_and_scale(mode):
+    V, F = make_surface('edgebump', 21)
+    res1 = flatten(V, F, boundary=mode)
+    R = np.linalg.qr(np.random.default_rng(7).normal(size=(3, 3)))[0]
+    if np.linalg.det(R) < 0:
+        R[:, 0] *= -1
+    scale = 3.7
+    V2 = scale * V @ R.T + np.array([5.0, -2.0, 11.0])
+    res2 = flatten(V2, F, boundary=mode)
+    tol = 1e-6 if mode != 'uniform' else 1e-4
+    for key in ('mu_ratio', 'qc_mean', 'flips'):
+        assert abs(res1.report[key] - res2.report[key]) <= tol * max(1, abs(res1.report[key]))
+    # UVs agree up to a rigid motion of the plane, scaled by `scale`: compare distances
+    idx = np.random.default_rng(0).choice(len(V), 60, replace=False)
+    d1 = np.linalg.norm(res1.uv[idx, None] - res1.uv[None, idx], axis=2)
+    d2 = np.linalg.norm(res2.uv[idx, None] - res2.uv[None, idx], axis=2)
+    assert np.abs(d2 - scale * d1).max() <= tol * scale * d1.max()
+    assert np.allclose(res1.mu, res2.mu, atol=tol)
+
+
+def test_unknown_modes_rejected():
+    V, F = make_surface('bump', 5)
+    with pytest.raises(ConformalError, match='boundary mode'):
+        flatten(V, F, boundary='bogus')
+    with pytest.raises(ConformalError, match='fit'):
+        flatten(V, F, fit='bogus')
+
+
+@pytest.mark.parametrize('bad, message', [
+    ('closed', 'closed'),
+    ('two_loops', '2 boundary loops'),
+    ('nan', 'NaN'),
+    ('empty', 'empty'),
+])
+def test_flatten_rejects_bad_input(bad, message):
+    V, F = make_surface('bump', 9)
+    if bad == 'closed':
+        V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+        F = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+    elif bad == 'two_loops':
+        centre = 4 * 9 + 4
+        F = F[~(F == centre).any(1)]
+        V = V.copy()
+        V[centre] = V[centre - 1]      # keep it out of the faces but referenced nowhere
+        F = F.copy()
+        keep = np.ones(len(V), bool)
+        keep[centre] = False
+        remap = np.cumsum(keep) - 1
+        V, F = V[keep], remap[F]
+    elif bad == 'nan':
+        V = V.copy()
+        V[3, 1] = np.nan
+    elif bad == 'empty':
+        V, F = np.zeros((0, 3)), np.zeros((0, 3), int)
+    with pytest.raises(ConformalError, match=message):
+        flatten(V, F)

@@ -1,0 +1,74 @@
+"""Discrete geometry and topology (DESIGN.md section 1)."""
+import numpy as np
+import pytest
+
+from core.geometry import angle_sums, corner_angles, face_areas
+from core.laplacian import cotan_laplacian, face_gradients, gradient, divergence
+from core.surfaces import make_surface
+from core.topology import boundary_loops, euler_characteristic
+from core.validate import check_mesh
+
+
+def octahedron():
+    """A closed genus-0 mesh, counter-clockwise seen from outside."""
+    P = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    T = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+    return P, T
+
+
+@pytest.mark.parametrize('name', ['bump', 'bump3', 'edgebump', 'ridge', 'saddle'])
+def test_gauss_bonnet_disk(name):
+    V, F = make_surface(name, 33)
+    info = check_mesh(V, F)
+    s = angle_sums(V, F)
+    B = np.zeros(len(V), bool)
+    B[info.boundary] = True
+    k = np.pi - s[B]
+    Omega = 2 * np.pi - s[~B]
+    assert abs(k.sum() + Omega.sum() - 2 * np.pi) < 1e-10
+    assert info.euler == 1
+
+
+def test_gauss_bonnet_closed():
+    V, F = octahedron()
+    assert euler_characteristic(F) == 2
+    assert abs((2 * np.pi - angle_sums(V, F)).sum() - 4 * np.pi) < 1e-12
+    assert boundary_loops(F, len(V)) == []
+
+
+def test_angles_sum_to_pi_and_areas():
+    rng = np.random.default_rng(3)
+    V = rng.normal(size=(30, 3))
+    F = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8]])
+    th = corner_angles(V, F)
+    assert np.allclose(th.sum(1), np.pi)
+    P = V[F]
+    A = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
+    assert np.allclose(face_areas(V, F), A)
+
+
+def test_cotan_laplacian_properties():
+    V, F = make_surface('saddle', 17)
+    L = cotan_laplacian(V, F)
+    assert abs(L - L.T).max() < 1e-12
+    assert np.abs(L @ np.ones(len(V))).max() < 1e-10
+    rng = np.random.default_rng(0)
+    f = rng.normal(size=len(V))
+    assert f @ (L @ f) > 0
+    # equals the P1 stiffness matrix: L f = div grad f
+    G, N, A = face_gradients(V, F)
+    assert np.allclose(L @ f, divergence(G, F, A, gradient(G, F, f), len(V)))
+    # linear functions are harmonic on a flat mesh, away from the boundary
+    Vf, Ff = make_surface('flat', 9)
+    info = check_mesh(Vf, Ff)
+    Lf = cotan_laplacian(Vf, Ff)
+    interior = np.setdiff1d(np.arange(len(Vf)), info.boundary)
+    assert np.abs((Lf @ (2 * Vf[:, 0] - 3 * Vf[:, 1]))[interior]).max() < 1e-12
+
+
+def test_boundary_loop_orientation():
+    V, F = make_surface('flat', 5)
+    loop = boundary_loops(F, len(V))[0]
+    P = V[loop, :2]
+    signed = 0.5 * np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1])
+    assert len(loop) == 16 and signed > 0        # counter-clockwise, surface on the left
