@@ -12,6 +12,7 @@ from .errors import ConformalError
 COMMANDS = {
     'flatten': ('cmd_flatten', 'flatten a disk mesh conformally and write an OBJ with UVs'),
     'make-surface': ('cmd_surface', 'write one of the test surfaces (DESIGN.md section 7)'),
+    'unwrap': ('cmd_unwrap', 'cut a mesh into islands along seams, flatten and pack them, write per-corner UVs'),
 }
 
 

@@ -11,10 +11,18 @@ from .triangulate import triangulate
 
 
 class ObjMesh:
-    """Polygons as read: ``V`` (n,3) float64, ``corner_verts`` (c,) int64, ``sizes`` (p,) int64."""
+    """Polygons as read: ``V`` (n,3) float64, ``corner_verts`` (c,) int64, ``sizes`` (p,) int64;
+    ``corner_uvs`` (c,) int64 the ``vt`` index of each corner (-1 where the face gives none);
+    ``lines`` (k,2) int64 the edges of ``l`` polylines (loose edges)."""
 
-    def __init__(self, V, corner_verts, sizes):
+    def __init__(self, V, corner_verts, sizes, corner_uvs=None, lines=None):
         self.V, self.corner_verts, self.sizes = V, corner_verts, sizes
+        self.corner_uvs = np.full(len(corner_verts), -1, np.int64) if corner_uvs is None else corner_uvs
+        self.lines = np.zeros((0, 2), np.int64) if lines is None else lines
+
+    def polygons(self):
+        """List of (k,) int64 vertex indices, one per polygon."""
+        return np.split(self.corner_verts, np.cumsum(self.sizes)[:-1])
 
     def triangles(self):
         """(F (m,3) int64, tri_poly (m,) int64): the polygons triangulated."""
@@ -24,7 +32,8 @@ class ObjMesh:
 
 def read_obj(path):
     """Read an OBJ file into an ``ObjMesh``. Raises ``ConformalError`` on unreadable input."""
-    V, corners, sizes = [], [], []
+    V, corners, sizes, cuv, lines = [], [], [], [], []
+    nvt = 0
     try:
         fh = open(path, 'r', encoding='utf-8', errors='replace')
     except OSError as exc:
@@ -37,14 +46,27 @@ def read_obj(path):
             try:
                 if p[0] == 'v':
                     V.append((float(p[1]), float(p[2]), float(p[3])))
+                elif p[0] == 'vt':
+                    nvt += 1
                 elif p[0] == 'f':
-                    idx = [int(q.split('/')[0]) for q in p[1:]]
+                    parts = [q.split('/') for q in p[1:]]
+                    idx = [int(q[0]) for q in parts]
                     if len(idx) < 3:
                         raise ValueError("a face needs at least 3 corners")
+                    if 0 in idx:
+                        raise ValueError("OBJ indices start at 1")
                     nv = len(V)
                     idx = [i - 1 if i > 0 else nv + i for i in idx]
+                    tex = [int(q[1]) if len(q) > 1 and q[1] else 0 for q in parts]
+                    tex = [t - 1 if t > 0 else (nvt + t if t < 0 else -1) for t in tex]
                     corners.extend(idx)
+                    cuv.extend(tex)
                     sizes.append(len(idx))
+                elif p[0] == 'l':
+                    idx = [int(q.split('/')[0]) for q in p[1:]]
+                    nv = len(V)
+                    idx = [i - 1 if i > 0 else nv + i for i in idx]
+                    lines.extend(zip(idx[:-1], idx[1:]))
             except (ValueError, IndexError) as exc:
                 raise ConformalError(f"{path} line {lineno}: cannot parse {line.strip()[:60]!r} ({exc})") from None
     if not V or not sizes:
@@ -53,22 +75,33 @@ def read_obj(path):
     corners = np.array(corners, dtype=np.int64)
     if corners.min() < 0 or corners.max() >= len(V):
         raise ConformalError(f"{path}: a face refers to a vertex that does not exist")
-    return ObjMesh(V, corners, np.array(sizes, dtype=np.int64))
+    lines = np.array(lines, dtype=np.int64).reshape(-1, 2)
+    if len(lines) and (lines.min() < 0 or lines.max() >= len(V)):
+        raise ConformalError(f"{path}: a line ('l') refers to a vertex that does not exist")
+    return ObjMesh(V, corners, np.array(sizes, dtype=np.int64), np.array(cuv, dtype=np.int64), lines)
 
 
-def write_obj(path, V, F, UV=None):
-    """Write ``V`` (n,3) and faces ``F`` ((m,k) array or a list of polygons); with ``UV`` (n,2) one ``vt`` per vertex and ``f v/vt``.
-    Written to a temporary file first, so a failure leaves no partial output."""
+def _index_lists(F):
+    return [list(map(int, f)) for f in (np.asarray(F, np.int64) + 1 if isinstance(F, np.ndarray)
+                                        else (np.asarray(f, np.int64) + 1 for f in F))]
+
+
+def write_obj(path, V, F, UV=None, UV_faces=None):
+    """Write ``V`` (n,3) and faces ``F`` ((m,k) array or a list of polygons). With ``UV`` (n,2) and no
+    ``UV_faces``: one ``vt`` per vertex and ``f v/vt`` with the same index. With ``UV`` (t,2) and
+    ``UV_faces`` (the same structure as ``F``, 0-based ``vt`` indices): per-corner UVs, as needed when
+    islands split vertices. Written to a temporary file first, so a failure leaves no partial output."""
     V = np.asarray(V, np.float64)
-    F = [list(map(int, f)) for f in (np.asarray(F, np.int64) + 1 if isinstance(F, np.ndarray)
-                                      else (np.asarray(f, np.int64) + 1 for f in F))]
+    F = _index_lists(F)
+    T = F if UV_faces is None else _index_lists(UV_faces)
     tmp = f"{path}.tmp{os.getpid()}"
     try:
         with open(tmp, 'w') as fh:
             fh.write(''.join(f"v {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in V.tolist()))
             if UV is not None:
                 fh.write(''.join(f"vt {u:.9g} {v:.9g}\n" for u, v in np.asarray(UV, float).tolist()))
-                fh.write(''.join('f ' + ' '.join(f"{i}/{i}" for i in f) + '\n' for f in F))
+                fh.write(''.join('f ' + ' '.join(f"{i}/{j}" for i, j in zip(f, t)) + '\n'
+                                 for f, t in zip(F, T)))
             else:
                 fh.write(''.join('f ' + ' '.join(str(i) for i in f) + '\n' for f in F))
         os.replace(tmp, path)

@@ -1,8 +1,9 @@
 """Polygons to triangles. Polygons come packed like Blender's: ``corner_verts`` (c,) vertex index per
 corner and ``sizes`` (p,) corners per polygon, polygons stored one after another.
 
-Triangles and quads are split as fans; larger polygons are ear-clipped in their best-fit plane, so
-concave n-gons triangulate without overlaps. The result refers to corners, so per-corner data (UVs)
+Triangles are kept; quads are split along a diagonal that neither folds them nor repeats an existing
+edge (a vertex shared by only two quads would otherwise give duplicate triangles); larger polygons
+are ear-clipped in their best-fit plane, so concave n-gons triangulate without overlaps. The result refers to corners, so per-corner data (UVs)
 can be written back to the polygons unchanged."""
 import numpy as np
 
@@ -46,6 +47,62 @@ def _ear_clip(P):
     return np.array(out, dtype=np.int64)
 
 
+def _edge_keys(a, b, n):
+    return np.minimum(a, b) * n + np.maximum(a, b)
+
+
+def _quad_normal_cos(P0, P1, P2, P3):
+    """Cosine between the normals of triangles (P0,P1,P2) and (P0,P2,P3), (q,); -1 when either has
+    zero area (the split is unusable)."""
+    n1 = np.cross(P1 - P0, P2 - P0)
+    n2 = np.cross(P2 - P0, P3 - P0)
+    l1, l2 = np.linalg.norm(n1, axis=1), np.linalg.norm(n2, axis=1)
+    ok = (l1 > 0) & (l2 > 0)
+    cos = np.full(len(P0), -1.0)
+    cos[ok] = (n1[ok] * n2[ok]).sum(1) / (l1[ok] * l2[ok])
+    return cos
+
+
+def _choose_quad_diagonals(tri, tri_poly, first, sizes, start, corner_verts, V):
+    """Split each quad (a,b,c,d) along a-c (the default) or b-d, in place in ``tri``. b-d is used when
+    a-c would fold or degenerate the quad (with ``V``), or when the a-c diagonal joins two vertices
+    that are already joined by a polygon edge or by another quad's diagonal: that happens around a
+    vertex shared by only two quads, and would create duplicate triangles and a non-manifold edge."""
+    quads = np.nonzero(sizes == 4)[0]
+    if len(quads) == 0:
+        return
+    s = start[quads]
+    a, b, c, d = (corner_verts[s + k] for k in range(4))
+    flip = np.zeros(len(quads), bool)
+    if V is not None:
+        V = np.asarray(V, np.float64)
+        cos_ac = _quad_normal_cos(V[a], V[b], V[c], V[d])
+        cos_bd = _quad_normal_cos(V[b], V[c], V[d], V[a])
+        flip = (cos_ac <= 0) & (cos_bd > cos_ac)
+    n = int(corner_verts.max()) + 1
+    nxt = np.arange(len(corner_verts)) + 1
+    ends = start + sizes
+    nxt[ends - 1] = start
+    poly_edges = np.unique(_edge_keys(corner_verts, corner_verts[nxt], n))
+    for _ in range(2):
+        diag = np.where(flip, _edge_keys(b, d, n), _edge_keys(a, c, n))
+        other = np.where(flip, _edge_keys(a, c, n), _edge_keys(b, d, n))
+        conflict = np.isin(diag, poly_edges)
+        _, inv, cnt = np.unique(diag, return_inverse=True, return_counts=True)
+        order = np.arange(len(diag))
+        first_of = np.full(len(cnt), len(diag))
+        np.minimum.at(first_of, inv, order)
+        conflict |= (cnt[inv] > 1) & (order != first_of[inv])
+        conflict &= ~np.isin(other, poly_edges)
+        if not conflict.any():
+            break
+        flip ^= conflict
+    r = first[quads[flip]]
+    sq = s[flip]
+    tri[r] = np.stack([sq + 1, sq + 2, sq + 3], axis=1)
+    tri[r + 1] = np.stack([sq + 1, sq + 3, sq], axis=1)
+
+
 def triangulate(corner_verts, sizes, V=None):
     """Triangulate packed polygons.
 
@@ -62,6 +119,7 @@ def triangulate(corner_verts, sizes, V=None):
     j = np.arange(len(tri_poly)) - np.repeat(first, ntri)
     s = start[tri_poly]
     tri = np.stack([s, s + j + 1, s + j + 2], axis=1)
+    _choose_quad_diagonals(tri, tri_poly, first, sizes, start, corner_verts, V)
     if V is not None:
         for p in np.nonzero(sizes >= 5)[0].tolist():
             c = np.arange(start[p], start[p] + sizes[p])

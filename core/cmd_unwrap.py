@@ -1,0 +1,134 @@
+"""``python -m core unwrap IN.obj OUT.obj [--seams SEAMS.txt | --seams-from-uv] [--holes fill|cut|error]
+[--boundary uniform|area|free] [--json]``: cut a mesh into islands along seams, flatten every island
+conformally, pack the islands and write an OBJ with one ``vt`` per island corner (``f v/vt``).
+
+SEAMS.txt holds one seam edge per line, two vertex numbers as in the OBJ's ``f`` lines (1-based);
+blank lines and text after ``#`` are ignored. Without seams, every connected piece is one island."""
+import json
+import sys
+
+import numpy as np
+
+from .errors import ConformalError
+from .flatten import BOUNDARY_MODES
+from .islands import FITS, HOLE_MODES, ISLAND_SCALES, seams_from_corner_ids, unwrap
+from .objio import read_obj, write_obj
+from .triangulate import triangulate
+from .validate import DEFAULT_MAX_FACES
+
+
+def add_arguments(p):
+    p.add_argument('input', help='input OBJ (n-gons are triangulated for the computation and kept)')
+    p.add_argument('output', help="output OBJ: the input's vertices and polygons, one vt per island corner")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument('--seams', metavar='SEAMS.txt',
+                   help='seam edges: one pair of 1-based OBJ vertex numbers per line')
+    g.add_argument('--seams-from-uv', action='store_true',
+                   help="use the input's own UV seams (edges where the vt indices differ across the edge)")
+    p.add_argument('--boundary', choices=BOUNDARY_MODES, default='uniform',
+                   help='boundary mode of every island (default: uniform)')
+    p.add_argument('--holes', choices=HOLE_MODES, default='fill',
+                   help='islands with holes: fill them virtually (default), cut them open to the outer '
+                        'boundary, or stop with an error')
+    p.add_argument('--island-scale', choices=ISLAND_SCALES, default='true',
+                   help='true: one texel density on all islands (default); normalise: equal UV area each')
+    p.add_argument('--fit', choices=FITS, default='unit_square',
+                   help='unit_square: the packed layout scaled into [0,1]^2 (default); true_scale: mesh units')
+    p.add_argument('--no-pack', action='store_true', help='leave every island centred where it was flattened')
+    p.add_argument('--margin', type=float, default=0.01, help='gap between packed islands, a fraction of '
+                   'the layout size (default 0.01)')
+    p.add_argument('--max-faces', type=int, default=DEFAULT_MAX_FACES,
+                   help=f'size limit in triangles (default {DEFAULT_MAX_FACES:,})')
+    p.add_argument('--ignore-loose', action='store_true', help='accept loose vertices and edges')
+    p.add_argument('--skip-bad', action='store_true',
+                   help='flatten the islands that can be flattened; the others get UV 0 and a warning')
+    p.add_argument('--json', action='store_true', help='print the report (summary and islands) as JSON')
+
+
+def read_seams(path, n):
+    """(k,2) int64 0-based vertex pairs from a seams file (1-based numbers, ``#`` comments)."""
+    pairs = []
+    try:
+        fh = open(path, 'r', encoding='utf-8', errors='replace')
+    except OSError as exc:
+        raise ConformalError(f"cannot read {path}: {exc.strerror}") from None
+    with fh:
+        for lineno, line in enumerate(fh, 1):
+            p = line.split('#', 1)[0].split()
+            if not p:
+                continue
+            try:
+                if len(p) != 2:
+                    raise ValueError("need two vertex numbers")
+                a, b = int(p[0]), int(p[1])
+            except ValueError as exc:
+                raise ConformalError(f"{path} line {lineno}: cannot parse {line.strip()[:60]!r} ({exc}): "
+                                     "write one seam per line as two 1-based vertex numbers") from None
+            if not (1 <= a <= n and 1 <= b <= n):
+                raise ConformalError(f"{path} line {lineno}: vertex numbers must lie in 1..{n} "
+                                     f"(1-based, as in the OBJ), got {a} {b}")
+            pairs.append((a - 1, b - 1))
+    return np.array(pairs, np.int64).reshape(-1, 2)
+
+
+def _check_polygon_edges(mesh, seams, path):
+    """Seams must be edges of the input polygons (not diagonals made by the triangulation)."""
+    if len(seams) == 0:
+        return
+    n = len(mesh.V)
+    nxt = np.arange(len(mesh.corner_verts)) + 1
+    ends = np.cumsum(mesh.sizes)
+    nxt[ends - 1] = ends - mesh.sizes
+    a, b = mesh.corner_verts, mesh.corner_verts[nxt]
+    edges = np.minimum(a, b) * n + np.maximum(a, b)
+    keys = seams.min(1) * n + seams.max(1)
+    bad = ~np.isin(keys, edges)
+    if bad.any():
+        ex = ', '.join(f"{x + 1}-{y + 1}" for x, y in seams[bad][:3].tolist())
+        raise ConformalError(f"{path}: {int(bad.sum())} seam(s) are not edges of the mesh's polygons, e.g. "
+                             f"{ex} (1-based): list edges that bound a face")
+
+
+def run(args):
+    mesh = read_obj(args.input)
+    tri_corners, tri_poly = triangulate(mesh.corner_verts, mesh.sizes, mesh.V)
+    F = mesh.corner_verts[tri_corners]
+    n = len(mesh.V)
+    if args.seams:
+        seams = read_seams(args.seams, n)
+        _check_polygon_edges(mesh, seams, args.seams)
+    elif args.seams_from_uv:
+        if (mesh.corner_uvs < 0).all():
+            raise ConformalError(f"{args.input} has no vt indices on its faces, so it has no UV seams: "
+                                 "give --seams SEAMS.txt, or leave out --seams-from-uv")
+        seams = seams_from_corner_ids(F, mesh.corner_uvs[tri_corners], n)
+    else:
+        seams = None
+    if len(mesh.lines) and not args.ignore_loose:
+        raise ConformalError(f"{args.input} has {len(mesh.lines)} loose edge(s) ('l' lines), e.g. "
+                             f"{mesh.lines[0, 0] + 1}-{mesh.lines[0, 1] + 1}: delete loose geometry, "
+                             "or pass --ignore-loose")
+    res = unwrap(mesh.V, F, seams=seams, boundary=args.boundary, holes=args.holes,
+                 island_scale=args.island_scale, pack=not args.no_pack, margin=args.margin, fit=args.fit,
+                 max_faces=args.max_faces, allow_loose=args.ignore_loose,
+                 on_error='skip' if args.skip_bad else 'raise', tri_poly=tri_poly)
+    # per-corner vt: every polygon corner takes the split vertex of its triangles' corner
+    corner_vt = np.full(len(mesh.corner_verts), -1, np.int64)
+    corner_vt[tri_corners.ravel()] = res.F.ravel()
+    polys = mesh.polygons()
+    uv_polys = np.split(corner_vt, np.cumsum(mesh.sizes)[:-1])
+    if (mesh.sizes == 3).all():
+        polys, uv_polys = np.asarray(mesh.corner_verts).reshape(-1, 3), corner_vt.reshape(-1, 3)
+    write_obj(args.output, mesh.V, polys, UV=res.uv, UV_faces=uv_polys)
+    r = res.report
+    if args.json:
+        print(json.dumps({'summary': r, 'islands': res.islands}))
+    else:
+        print(f"{r['islands']} island(s), {r['flattened']} flattened ({args.boundary}), holes filled "
+              f"{r['holes_filled']}, cut {r['holes_cut']}: flips {r['flips']}, overlaps {r['overlaps']}, "
+              f"worst qc_mean {r['qc_mean_worst']:.4f}, worst mu_ratio {r['mu_ratio_worst']:.4f}, "
+              f"{r['seconds']:.2f} s")
+    for isl in res.islands:
+        if 'error' in isl:
+            print(f"warning: skipped {isl['error']}", file=sys.stderr)
+    return 0

@@ -1,0 +1,518 @@
+"""UV islands: cut a mesh along seams, make every island a disk, flatten each one, pack them.
+
+Pipeline of ``unwrap``:
+
+1. Validate the whole mesh (``check_mesh`` kind 'surface', several pieces allowed).
+2. ``cut_along_seams``: triangles joined across a non-seam interior edge belong to the same island;
+   the corners around each vertex are grouped into wedges separated by seam edges, and every wedge
+   becomes its own vertex. So islands never share vertices, and a seam that ends inside an island
+   (a slit, such as a meridian from the equator to a pole) opens the island along it.
+3. Holes: an island with several boundary loops keeps its longest loop as the outer boundary. The
+   others are either filled virtually (``holes='fill'``: a cap of rings and a fan around a new centre
+   vertex, flattened with the island and removed afterwards) or cut open (``holes='cut'``: a
+   shortest edge path from the outer boundary to the hole becomes an extra seam).
+4. Each island is flattened by ``core.flatten.flatten`` with the chosen boundary mode, and measured
+   on its real faces only.
+5. Scale: by default every island keeps UV area = 3D area, so one texel density holds on all of
+   them (``island_scale='true'``); ``'normalise'`` gives every island the same UV area instead.
+6. ``shelf_pack`` places the islands' bounding boxes in rows without overlap.
+
+Indices: ``F`` (m,3) are the input triangles; "split vertices" are the vertices after cutting, with
+``vert_of`` (N,) giving the input vertex of each. UVs are per split vertex, i.e. per corner.
+"""
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components, dijkstra
+
+from .errors import ConformalError
+from .geometry import face_areas
+from .measures import uv_measures
+from . import topology
+from .validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, check_loose_edges
+
+HOLE_MODES = ('fill', 'cut', 'error')
+ISLAND_SCALES = ('true', 'normalise')
+FITS = ('unit_square', 'true_scale')
+ON_ERROR = ('raise', 'skip')
+
+
+# ----------------------------------------------------------------------------------------------
+# cutting
+# ----------------------------------------------------------------------------------------------
+@dataclass
+class Cut:
+    """A triangle mesh cut along seams. ``F`` (m,3) int64 split-vertex ids per corner; ``vert_of``
+    (N,) int64 input vertex of each split vertex; ``face_island`` (m,) int64 island of each triangle;
+    ``vert_island`` (N,) island of each split vertex; ``n_islands``. Split vertices are numbered
+    island by island, so island i owns ids ``vert_start[i]:vert_start[i+1]``."""
+    F: np.ndarray
+    vert_of: np.ndarray
+    face_island: np.ndarray
+    vert_island: np.ndarray
+    n_islands: int
+
+    @property
+    def vert_start(self):
+        """(n_islands+1,) first split vertex of each island."""
+        return np.r_[0, np.cumsum(np.bincount(self.vert_island, minlength=self.n_islands))]
+
+    def island_faces(self):
+        """List of (k_i,) int64 triangle indices of each island, in input order."""
+        order = np.argsort(self.face_island, kind='stable')
+        cuts = np.cumsum(np.bincount(self.face_island, minlength=self.n_islands))[:-1]
+        return np.split(order, cuts)
+
+
+def seam_pairs(seams, n):
+    """Check seams and return them as (k,2) int64 vertex pairs. ``seams``: (k,2) array-like of
+    vertex indices, or None. Raises ``ConformalError`` naming the bad seams."""
+    if seams is None:
+        return np.zeros((0, 2), np.int64)
+    try:
+        S = np.asarray(seams, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ConformalError(f"seams are not numeric: {exc}") from None
+    if S.size == 0:
+        return np.zeros((0, 2), np.int64)
+    if S.ndim != 2 or S.shape[1] != 2:
+        raise ConformalError(f"seams must be a (k,2) array of vertex index pairs, got shape {S.shape}")
+    bad = ~np.isfinite(S).all(1) | (S != np.round(S)).any(1)
+    if not bad.any():
+        bad = (S < 0).any(1) | (S >= n).any(1)
+    if bad.any():
+        i = int(np.nonzero(bad)[0][0])
+        raise ConformalError(f"{int(bad.sum())} seam(s) name vertices that do not exist, e.g. seam {i} "
+                             f"{tuple(S[i].tolist())}: seam vertex indices must be integers in 0..{n - 1}")
+    S = S.astype(np.int64)
+    loop = S[:, 0] == S[:, 1]
+    if loop.any():
+        i = int(np.nonzero(loop)[0][0])
+        raise ConformalError(f"seam {i} joins vertex {S[i, 0]} to itself: a seam is an edge between two "
+                             "different vertices")
+    return S
+
+
+def _seam_halfedges(F, n, seams):
+    """(3m,) bool: half-edges whose undirected edge is a seam. Raises if a seam is not an edge."""
+    S = seam_pairs(seams, n)
+    H = topology.halfedges(F)
+    if len(S) == 0:
+        return np.zeros(len(H), bool)
+    hkey = np.minimum(H[:, 0], H[:, 1]) * n + np.maximum(H[:, 0], H[:, 1])
+    skey = np.minimum(S[:, 0], S[:, 1]) * n + np.maximum(S[:, 0], S[:, 1])
+    found = np.isin(skey, hkey)
+    if not found.all():
+        bad = np.nonzero(~found)[0]
+        ex = ', '.join(f"({a}, {b})" for a, b in S[bad[:3]].tolist())
+        raise ConformalError(f"{len(bad)} seam(s) are not edges of the mesh, e.g. {ex}: a seam must join "
+                             "two vertices of one face")
+    return np.isin(hkey, skey)
+
+
+def cut_along_seams(F, n, seams=None):
+    """Cut the triangle mesh ``F`` (m,3) with ``n`` vertices along ``seams`` ((k,2) vertex pairs or
+    None). The mesh must be manifold and consistently oriented (``check_mesh``). Returns ``Cut``."""
+    F = np.asarray(F, np.int64)
+    m = len(F)
+    tw = topology.twin_halfedges(F, n)
+    join = (tw >= 0) & ~_seam_halfedges(F, n, seams)
+    h = np.nonzero(join)[0]
+    ones = np.ones(len(h), np.int8)
+    n_isl, face_island = connected_components(
+        sp.coo_matrix((ones, (h // 3, tw[h] // 3)), shape=(m, m)), directed=False)
+    # corner 3t+k sits at F[t,k]; the twin of half-edge h (leaving that corner) ends at the same vertex
+    other = (tw[h] // 3) * 3 + (tw[h] % 3 + 1) % 3
+    _, wedge = connected_components(sp.coo_matrix((ones, (h, other)), shape=(3 * m, 3 * m)),
+                                    directed=False)
+    Fr = F.ravel()
+    _, first = np.unique(wedge, return_index=True)
+    w_vert, w_isl = Fr[first], face_island[first // 3]
+    order = np.lexsort((w_vert, w_isl))
+    newid = np.empty(len(order), np.int64)
+    newid[order] = np.arange(len(order))
+    return Cut(F=newid[wedge].reshape(m, 3), vert_of=w_vert[order], face_island=face_island.astype(np.int64),
+               vert_island=w_isl[order].astype(np.int64), n_islands=int(n_isl))
+
+
+def seams_from_corner_ids(F, corner_ids, n=None):
+    """Seams implied by per-corner ids such as OBJ ``vt`` indices: an interior edge is a seam when the
+    two triangles beside it give either of its ends different ids. ``F`` (m,3), ``corner_ids`` (m,3)
+    int (negative = no id; such corners never make a seam). Returns (k,2) int64 vertex pairs."""
+    F = np.asarray(F, np.int64)
+    C = np.asarray(corner_ids, np.int64).reshape(F.shape)
+    n = int(F.max()) + 1 if n is None else n
+    tw = topology.twin_halfedges(F, n)
+    h = np.nonzero(tw >= 0)[0]
+    c_start, c_end = C.ravel()[h], C.ravel()[(h // 3) * 3 + (h % 3 + 1) % 3]
+    t = tw[h]
+    o_start, o_end = C.ravel()[t], C.ravel()[(t // 3) * 3 + (t % 3 + 1) % 3]
+    # the twin runs the other way: its end is our start
+    differ = ((c_start != o_end) & (c_start >= 0) & (o_end >= 0)) | \
+             ((c_end != o_start) & (c_end >= 0) & (o_start >= 0))
+    E = np.sort(topology.halfedges(F)[h[differ]], axis=1)
+    return np.unique(E, axis=0) if len(E) else np.zeros((0, 2), np.int64)
+
+
+# ----------------------------------------------------------------------------------------------
+# holes
+# ----------------------------------------------------------------------------------------------
+def fill_holes(V, F, loops, rings=None):
+    """Close every boundary loop but the first (the outer one) with a temporary cap.
+
+    ``V`` (n,3), ``F`` (m,3), ``loops``: list of (k,) vertex loops with the surface on their left,
+    longest first. Each hole gets ``rings`` (default: about k/12, 1 to 6) shrinking copies of its
+    loop and a fan around a new centre vertex (the loop's centroid). The cap is flat (in the loop's
+    best-fit plane direction) when that gives a valid triangulation of the projected hole, which is
+    exact for a planar hole that is star-shaped from its centroid; otherwise it is lifted into a low
+    dome so that no cap triangle is degenerate. Returns ``(V2 (n2,3), F2 (m2,3), info)``: the first n vertices and m triangles are the
+    input's; ``info`` is a list of dicts (loop length, added vertices and faces) per filled hole."""
+    Vs, Fs, info = [V], [F], []
+    nv = len(V)
+    for loop in loops[1:]:
+        k = len(loop)
+        P = V[loop]
+        seg = np.linalg.norm(np.roll(P, -1, 0) - P, axis=1)
+        w = 0.5 * (seg + np.roll(seg, 1))
+        c = (P * w[:, None]).sum(0) / max(w.sum(), np.finfo(float).tiny)
+        radius = float(np.linalg.norm(P - c, axis=1).mean())
+        R = int(np.clip(np.ceil(k / 12), 1, 6)) if rings is None else max(1, int(rings))
+        s = 1.0 - np.arange(1, R) / R                      # ring j = 1..R-1 (ring 0 is the loop)
+        # flat cap if the hole, projected on its plane, is star-shaped from the centroid
+        Wt = np.linalg.svd(P - c, full_matrices=False)[2]
+        nrm = Wt[-1]
+        Q = (P - c) @ Wt[:2].T
+        turn = Q[:, 0] * np.roll(Q[:, 1], -1) - Q[:, 1] * np.roll(Q[:, 0], -1)
+        star = (np.sign(turn) == np.sign(turn.sum())).all() and \
+            np.abs(turn).min() > 1e-3 * np.abs(turn).max()
+        lift = 0.0 if star else 0.3 * radius
+        ring_pos = c + s[:, None, None] * (P - c) + (lift * (1 - s ** 2))[:, None, None] * nrm
+        centre = c + lift * nrm
+        ids = [loop] + [nv + j * k + np.arange(k) for j in range(R - 1)]
+        cid = nv + (R - 1) * k
+        tris = []
+        for j in range(R - 1):
+            a, b = ids[j], ids[j + 1]
+            a1, b1 = np.roll(a, -1), np.roll(b, -1)
+            tris += [np.stack([a1, a, b], 1), np.stack([a1, b, b1], 1)]
+        last = ids[-1]
+        tris.append(np.stack([np.roll(last, -1), last, np.full(k, cid)], 1))
+        Vs += [ring_pos.reshape(-1, 3), centre[None]]
+        Fs += tris
+        added = (R - 1) * k + 1
+        info.append({'loop_vertices': int(k), 'fill_vertices': int(added),
+                     'fill_faces': int(sum(len(t) for t in tris))})
+        nv += added
+    return np.concatenate(Vs), np.concatenate(Fs).astype(np.int64), info
+
+
+def hole_cut_paths(V, F, n, loops):
+    """Edge paths that cut every hole open to the outer boundary, for ``holes='cut'``.
+
+    Hole by hole, the shortest path (3D edge lengths, Dijkstra from all outer-loop vertices) to the
+    nearest vertex of another loop is cut, which merges that hole into the outer boundary. Returns a
+    list of (k,2) int64 vertex pairs of ``F``'s vertex ids (one per hole)."""
+    paths = []
+    Fc, vmap = F, np.arange(n)
+    for _ in range(len(loops) - 1):
+        nc = int(Fc.max()) + 1
+        cur = topology.boundary_loops(Fc, nc)
+        if len(cur) <= 1:
+            break
+        E, _ = topology.unique_edges(Fc)
+        Vc = V[vmap]
+        wgt = np.linalg.norm(Vc[E[:, 0]] - Vc[E[:, 1]], axis=1)
+        G = sp.coo_matrix((wgt, (E[:, 0], E[:, 1])), shape=(nc, nc)).tocsr()
+        outer = cur[0]
+        dist, pred, _ = dijkstra(G, directed=False, indices=outer, min_only=True,
+                                 return_predecessors=True)
+        holes = np.concatenate(cur[1:])
+        t = int(holes[np.argmin(dist[holes])])
+        if not np.isfinite(dist[t]):
+            break
+        path = [t]
+        while pred[path[-1]] >= 0:
+            path.append(int(pred[path[-1]]))
+        path = np.array(path[::-1], np.int64)
+        pairs = np.stack([path[:-1], path[1:]], 1)
+        paths.append(vmap[pairs])
+        cut = cut_along_seams(Fc, nc, pairs)
+        Fc, vmap = cut.F, vmap[cut.vert_of]
+    return paths
+
+
+# ----------------------------------------------------------------------------------------------
+# checks of a UV layout
+# ----------------------------------------------------------------------------------------------
+def boundary_crossings(uv, loops):
+    """Number of pairs of boundary segments that cross each other in the UV plane. ``uv`` (n,2),
+    ``loops`` list of (k,) vertex loops. Together with zero flipped triangles, zero crossings means
+    the map of a disk is one-to-one (no overlap)."""
+    if not loops:
+        return 0
+    a = np.concatenate(loops)
+    b = np.concatenate([np.roll(lp, -1) for lp in loops])
+    P, Q = uv[a], uv[b]
+    lo_x, hi_x = np.minimum(P[:, 0], Q[:, 0]), np.maximum(P[:, 0], Q[:, 0])
+    lo_y, hi_y = np.minimum(P[:, 1], Q[:, 1]), np.maximum(P[:, 1], Q[:, 1])
+    order = np.argsort(lo_x, kind='stable')
+    a, b, P, Q = a[order], b[order], P[order], Q[order]
+    lo_x, hi_x, lo_y, hi_y = lo_x[order], hi_x[order], lo_y[order], hi_y[order]
+
+    def orient(p, q, r):
+        return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
+
+    count = 0
+    i = np.arange(len(a))
+    d = 1
+    while len(i):
+        i = i[i + d < len(a)]
+        j = i + d
+        i = i[lo_x[j] <= hi_x[i]]           # sorted by lo_x: once a pair misses, later ones miss too
+        j = i + d
+        cand = (lo_y[j] <= hi_y[i]) & (lo_y[i] <= hi_y[j])
+        cand &= (a[i] != a[j]) & (a[i] != b[j]) & (b[i] != a[j]) & (b[i] != b[j])
+        ci, cj = i[cand], j[cand]
+        if len(ci):
+            x = (orient(P[ci], Q[ci], P[cj]) * orient(P[ci], Q[ci], Q[cj]) < 0) & \
+                (orient(P[cj], Q[cj], P[ci]) * orient(P[cj], Q[cj], Q[ci]) < 0)
+            count += int(x.sum())
+        d += 1
+    return count
+
+
+def shelf_pack(sizes, margin):
+    """Place boxes ``sizes`` (k,2) (width, height) in rows ("shelves"), tallest first, rows about as
+    wide as the square root of the total area. ``margin`` is the gap between boxes and around them.
+    Returns (offsets (k,2) of the boxes' lower-left corners, (width, height) of the layout)."""
+    sizes = np.asarray(sizes, np.float64)
+    k = len(sizes)
+    off = np.zeros((k, 2))
+    if k == 0:
+        return off, (0.0, 0.0)
+    padded = sizes + margin
+    row_w = max(float(padded[:, 0].max()), float(np.sqrt((padded[:, 0] * padded[:, 1]).sum())))
+    x = y = margin
+    row_h = 0.0
+    for i in np.argsort(-sizes[:, 1], kind='stable').tolist():
+        if x > margin and x + padded[i, 0] > row_w + margin:
+            y += row_h
+            x, row_h = margin, 0.0
+        off[i] = (x, y)
+        x += padded[i, 0]
+        row_h = max(row_h, padded[i, 1])
+    width = float((off[:, 0] + sizes[:, 0]).max() + margin)
+    height = float((off[:, 1] + sizes[:, 1]).max() + margin)
+    return off, (width, height)
+
+
+# ----------------------------------------------------------------------------------------------
+# unwrap
+# ----------------------------------------------------------------------------------------------
+@dataclass
+class UnwrapResult:
+    """``uv`` (N,2) per split vertex; ``F`` (m,3) split vertex of each corner of the input triangles;
+    ``vert_of`` (N,) input vertex of each split vertex; ``face_island`` (m,) island of each triangle;
+    ``ok`` (m,) False on triangles of islands skipped after an error (their UVs are 0);
+    ``islands`` list of per-island report dicts; ``report`` dict summary."""
+    uv: np.ndarray
+    F: np.ndarray
+    vert_of: np.ndarray
+    face_island: np.ndarray
+    ok: np.ndarray
+    islands: list = field(default_factory=list)
+    report: dict = field(default_factory=dict)
+
+    @property
+    def corner_uv(self):
+        """(m,3,2) UV of every corner of every input triangle."""
+        return self.uv[self.F]
+
+
+def _describe(i, n_isl, faces, tri_poly):
+    what = f"polygon {int(tri_poly[faces[0]])}" if tri_poly is not None else f"triangle {int(faces[0])}"
+    return f"island {i + 1} of {n_isl} ({len(faces)} triangles, e.g. {what})"
+
+
+def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
+    """Flatten one island (local ``V`` (n,3), ``F`` (m,3), its boundary ``loops``). Returns (uv (n,2)
+    in mesh units with UV area = 3D area, report dict)."""
+    from .flatten import flatten
+    n, m = len(V), len(F)
+    rep = {'loops': len(loops)}
+    if not loops:
+        raise ConformalError(f"{desc} is closed (it has no boundary): mark seams that cut it open "
+                             "(for example a seam loop around it plus a seam across each half), or use "
+                             "sphere mode")
+    chi = topology.euler_characteristic(F)
+    genus = (2 - chi - len(loops)) // 2
+    if genus > 0:
+        raise ConformalError(f"{desc} has genus {genus} (Euler characteristic {chi} with {len(loops)} "
+                             f"boundary loop(s)): mark seams that cut through every handle")
+    Vf, Ff = V, F
+    if len(loops) > 1:
+        if holes == 'error':
+            raise ConformalError(f"{desc} has {len(loops)} boundary loops (an outer boundary and "
+                                 f"{len(loops) - 1} hole(s)): fill the holes (holes='fill', CLI "
+                                 "--holes fill), cut them open (holes='cut'), or mark a seam from each "
+                                 "hole to the outer boundary")
+        Vf, Ff, info = fill_holes(V, F, loops)
+        rep['holes'] = {'mode': 'fill', 'filled': len(info), 'fill_vertices': sum(h['fill_vertices'] for h in info),
+                        'fill_faces': sum(h['fill_faces'] for h in info),
+                        'hole_loop_vertices': [h['loop_vertices'] for h in info]}
+    res = flatten(Vf, Ff, boundary=boundary, fit='true_scale', max_faces=None, progress=progress, **options)
+    uv = res.uv[:n]
+    W = uv[F]
+    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+    a_uv = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
+    if not a_uv > 0:
+        raise ConformalError(f"{desc}: the flattened island has no positive UV area; the mesh is "
+                             "numerically degenerate: merge vertices by distance and retry")
+    uv = (uv - uv.mean(0)) * np.sqrt(face_areas(V, F).sum() / a_uv)
+    rep.update(uv_measures(V, F, uv))
+    rep['overlaps'] = boundary_crossings(uv, loops)
+    if len(loops) == 1:          # with a fill these describe the filled mesh, not the island
+        rep.update({k: res.report[k] for k in ('bound_vertex', 'vertex_ratio') if k in res.report})
+    rep['seconds'] = res.report.get('seconds', {}).get('total')
+    return uv, rep
+
+
+def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='true', pack=True,
+           margin=0.01, fit='unit_square', max_faces=DEFAULT_MAX_FACES, allow_loose=False, edges=None,
+           on_error='raise', tri_poly=None, progress=None, **options):
+    """Cut a triangle mesh into islands along ``seams`` and flatten every island conformally.
+
+    V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise. seams: (k,2) int vertex pairs
+    (edges marked as seams) or None; connected pieces are islands even without seams.
+    boundary: 'uniform', 'area' or 'free' (``core.flatten``). holes: 'fill' (virtual fill, default),
+    'cut' (cut each hole to the outer boundary) or 'error'. island_scale: 'true' (UV area = 3D area
+    on every island: one texel density) or 'normalise' (every island gets the same UV area).
+    pack: shelf-pack the islands without overlap, ``margin`` a fraction of the layout size.
+    fit: 'unit_square' (scale the whole layout uniformly into [0,1]^2) or 'true_scale' (mesh units).
+    max_faces: size limit (None: none). allow_loose: accept vertices in no face. edges: optional
+    (e,2) all edges of the mesh, checked for loose edges. on_error: 'raise' stops at the first island
+    that cannot be flattened; 'skip' leaves its UVs at 0, marks it in ``ok`` and reports the error.
+    tri_poly: optional (m,) polygon of each triangle, used to name polygons in messages.
+    progress: optional callable ``progress(fraction, message)``. Extra ``options`` go to ``flatten``.
+    Returns ``UnwrapResult``. Raises ``ConformalError`` for bad input."""
+    for name, value, allowed in (('holes', holes, HOLE_MODES), ('island_scale', island_scale, ISLAND_SCALES),
+                                 ('fit', fit, FITS), ('on_error', on_error, ON_ERROR)):
+        if value not in allowed:
+            raise ConformalError(f"unknown {name} {value!r}: use one of {', '.join(allowed)}")
+    if not (np.isfinite(margin) and 0 <= margin < 0.5):
+        raise ConformalError(f"margin must be a fraction in [0, 0.5), got {margin}")
+    report_progress = progress or (lambda f, msg: None)
+    t0 = time.perf_counter()
+    V, F = as_arrays(V, F)
+    check_mesh(V, F, kind='surface', max_faces=max_faces, allow_loose=allow_loose, allow_parts=True)
+    if edges is not None:
+        check_loose_edges(edges, F)
+    n, m = len(V), len(F)
+    if tri_poly is not None:
+        tri_poly = np.asarray(tri_poly, np.int64)
+        if tri_poly.shape != (m,):
+            raise ConformalError(f"tri_poly must have one polygon index per triangle ({m}), got shape "
+                                 f"{tri_poly.shape}")
+    report_progress(0.02, 'cutting along seams')
+    seams = seam_pairs(seams, n)
+    cut = cut_along_seams(F, n, seams)
+    cut_info = {}
+    if holes == 'cut':
+        extra = []
+        for i, faces in enumerate(cut.island_faces()):
+            Fi = cut.F[faces]
+            lo = cut.vert_start[i]
+            ni = cut.vert_start[i + 1] - lo
+            loops = topology.boundary_loops(Fi - lo, ni)
+            if len(loops) > 1:
+                paths = hole_cut_paths(V[cut.vert_of[lo:lo + ni]], Fi - lo, ni, loops)
+                got = [cut.vert_of[lo + p] for p in paths]
+                extra += got
+                cut_info[i] = {'mode': 'cut', 'cut': len(got), 'cut_edges': int(sum(len(p) for p in got))}
+        if extra:
+            seams = np.concatenate([seams] + extra)
+            cut = cut_along_seams(F, n, seams)     # the same islands, in the same order
+    island_faces = cut.island_faces()
+    n_isl = cut.n_islands
+    areas = np.bincount(cut.face_island, face_areas(V, F), minlength=n_isl)
+    uv = np.zeros((len(cut.vert_of), 2))
+    ok = np.ones(m, bool)
+    weights = np.cumsum([0] + [len(f) for f in island_faces]) / m
+    reports, boxes, failed = [], [], []
+    for i, faces in enumerate(island_faces):
+        lo, hi = cut.vert_start[i], cut.vert_start[i + 1]
+        Fi = cut.F[faces] - lo
+        Vi = V[cut.vert_of[lo:hi]]
+        desc = _describe(i, n_isl, faces, tri_poly)
+        base, span = 0.05 + 0.85 * weights[i], 0.85 * (weights[i + 1] - weights[i])
+
+        def sub(f, msg, base=base, span=span, i=i):
+            report_progress(base + span * f, f"island {i + 1}/{n_isl}: {msg}")
+
+        rep = {'island': i + 1, 'triangles': len(faces), 'vertices': int(hi - lo)}
+        try:
+            loops = topology.boundary_loops(Fi, hi - lo)
+            ui, r = _flatten_island(Vi, Fi, loops, holes, boundary, desc, sub, options)
+            rep.update(r)
+            if i in cut_info:
+                rep['holes'] = cut_info[i]
+                rep['loops_before_cut'] = rep['loops'] + cut_info[i]['cut']
+        except ConformalError as exc:
+            msg = str(exc)
+            if not msg.startswith('island '):
+                msg = f"{desc}: {msg}"
+            if on_error == 'raise' or n_isl == 1:
+                raise ConformalError(msg) from None
+            rep['error'] = msg
+            failed.append(i)
+            ok[faces] = False
+            ui = np.zeros((hi - lo, 2))
+        rep['area_3d'] = float(areas[i])
+        if 'error' not in rep:
+            if island_scale == 'normalise':
+                ui = ui * np.sqrt(areas.mean() / areas[i])
+            lo_uv, hi_uv = ui.min(0), ui.max(0)
+            if hi_uv[1] - lo_uv[1] > hi_uv[0] - lo_uv[0]:      # lie wide: rotate by 90 degrees
+                ui = np.stack([ui[:, 1], -ui[:, 0]], 1)
+            ui = ui - ui.min(0)
+        uv[lo:hi] = ui
+        reports.append(rep)
+        boxes.append(ui.max(0) if 'error' not in rep else np.zeros(2))
+    if len(failed) == n_isl:
+        raise ConformalError(f"no island could be flattened; the first error: {reports[0]['error']}")
+    report_progress(0.92, 'packing islands')
+    boxes = np.array(boxes)
+    good = np.array(['error' not in r for r in reports])
+    size = np.sqrt((boxes[good, 0] * boxes[good, 1]).sum())
+    layout = (float(boxes[:, 0].max()), float(boxes[:, 1].max()))
+    if pack:
+        gap = margin * size / max(1e-12, 1 - 2 * margin)
+        off, layout = shelf_pack(boxes[good], gap)
+        for k, i in enumerate(np.nonzero(good)[0]):
+            lo, hi = cut.vert_start[i], cut.vert_start[i + 1]
+            uv[lo:hi] += off[k]
+    if fit == 'unit_square':
+        uv /= max(layout) if max(layout) > 0 else 1.0
+    keep = good[cut.vert_island]
+    uv[~keep] = 0.0
+    rep_ok = [r for r in reports if 'error' not in r]
+    summary = {
+        'islands': n_isl, 'flattened': len(rep_ok), 'failed': len(failed), 'boundary': boundary,
+        'holes': holes, 'island_scale': island_scale, 'packed': bool(pack), 'fit': fit,
+        'triangles': m, 'vertices': n, 'split_vertices': int(len(cut.vert_of)),
+        'seams': int(len(seams)),
+        'holes_filled': int(sum(r.get('holes', {}).get('filled', 0) for r in rep_ok)),
+        'holes_cut': int(sum(r.get('holes', {}).get('cut', 0) for r in rep_ok)),
+        'flips': int(sum(r['flips'] for r in rep_ok)),
+        'overlaps': int(sum(r['overlaps'] for r in rep_ok)),
+        'qc_mean_worst': float(max(r['qc_mean'] for r in rep_ok)),
+        'mu_ratio_worst': float(min(r['mu_ratio'] for r in rep_ok)),
+        'pack_efficiency': float((boxes[good, 0] * boxes[good, 1]).sum() / max(1e-300, layout[0] * layout[1]))
+        if pack else None,
+        'seconds': round(time.perf_counter() - t0, 4),
+    }
+    report_progress(1.0, 'done')
+    return UnwrapResult(uv=uv, F=cut.F, vert_of=cut.vert_of, face_island=cut.face_island, ok=ok,
+                        islands=reports, report=summary)

@@ -1,0 +1,82 @@
+"""Small mesh generators shared by the robustness tests (numpy only)."""
+import numpy as np
+
+from core.surfaces import make_surface
+
+
+def uv_sphere(n_lat=16, n_lon=32):
+    """Latitude/longitude unit sphere with a vertex at each pole. Returns ``V`` (n,3), ``F`` (m,3)
+    counter-clockwise seen from outside, and ``seams`` (k,2): the equator ring (n_lat even) and one
+    meridian from pole to pole."""
+    th = np.pi * np.arange(1, n_lat) / n_lat
+    ph = 2 * np.pi * np.arange(n_lon) / n_lon
+    T, P = np.meshgrid(th, ph, indexing='ij')
+    ring = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1).reshape(-1, 3)
+    V = np.vstack([[0, 0, 1.0], ring, [0, 0, -1.0]])
+    south = len(V) - 1
+
+    def rid(i, j):
+        return 1 + i * n_lon + (j % n_lon)
+
+    j = np.arange(n_lon)
+    F = [np.stack([np.zeros(n_lon, np.int64), rid(0, j), rid(0, j + 1)], 1)]
+    for i in range(n_lat - 2):
+        a, b, c, d = rid(i, j), rid(i + 1, j), rid(i + 1, j + 1), rid(i, j + 1)
+        F += [np.stack([a, b, c], 1), np.stack([a, c, d], 1)]
+    F.append(np.stack([np.full(n_lon, south), rid(n_lat - 2, j + 1), rid(n_lat - 2, j)], 1))
+    F = np.concatenate(F).astype(np.int64)
+    e = n_lat // 2 - 1
+    equator = np.stack([rid(e, j), rid(e, j + 1)], 1)
+    mer = np.r_[0, [rid(i, 0) for i in range(n_lat - 1)], south]
+    meridian = np.stack([mer[:-1], mer[1:]], 1)
+    return V, F, np.concatenate([equator, meridian]).astype(np.int64)
+
+
+def compact(V, F):
+    """Drop vertices in no face; returns ``V``, ``F`` renumbered."""
+    used = np.unique(F)
+    remap = np.full(len(V), -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return V[used], remap[F]
+
+
+def two_holes(name='bump', n=33):
+    """Height field ``name`` with two holes (a square and a disk) punched out."""
+    V, F = make_surface(name, n)
+    inside = ((np.abs(V[:, 0] + 0.9) < 0.4) & (np.abs(V[:, 1]) < 0.4)) | \
+             (np.hypot(V[:, 0] - 0.9, V[:, 1] - 0.3) < 0.5)
+    return compact(V, F[~inside[F].any(1)])
+
+
+def grid(n=5):
+    """Flat n x n grid on [0,1]^2: ``V`` (n*n,3), ``F`` (2(n-1)^2,3)."""
+    V, F = make_surface('flat', n)
+    return V, F
+
+
+def coverage(uv, F, res=256, eps=1e-9):
+    """Rasterise triangles ``F`` (m,3) of ``uv`` (n,2) at the centres of a res x res grid over their
+    bounding box. Returns (k,) int: for every sample point inside at least one triangle, how many
+    triangles contain it. A value above 1 is an overlap. Vectorised over candidate (triangle, sample)
+    pairs from each triangle's bounding box."""
+    lo, hi = uv.min(0), uv.max(0)
+    h = (hi - lo).max() / res
+    W = (uv[F] - lo) / h - 0.5                      # sample (i, j) sits at integer coordinates
+    bmin = np.ceil(W.min(1)).astype(np.int64)
+    bmax = np.floor(W.max(1)).astype(np.int64)
+    nx = np.maximum(bmax[:, 0] - bmin[:, 0] + 1, 0)
+    ny = np.maximum(bmax[:, 1] - bmin[:, 1] + 1, 0)
+    cnt = nx * ny
+    t = np.repeat(np.arange(len(F)), cnt)
+    k = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    px = bmin[t, 0] + k % nx[t]
+    py = bmin[t, 1] + k // nx[t]
+    a, b, c = W[t, 0], W[t, 1], W[t, 2]
+
+    def side(p, q):
+        return (q[:, 0] - p[:, 0]) * (py - p[:, 1]) - (q[:, 1] - p[:, 1]) * (px - p[:, 0])
+
+    s1, s2, s3 = side(a, b), side(b, c), side(c, a)
+    inside = ((s1 > eps) & (s2 > eps) & (s3 > eps)) | ((s1 < -eps) & (s2 < -eps) & (s3 < -eps))
+    key = px[inside] * (res + 10) + py[inside]
+    return np.unique(key, return_counts=True)[1]
