@@ -15,7 +15,7 @@ $(STAMP): requirements.txt requirements-dev.txt
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m addon.demo --out out/demo
+	$(PY) tools/demo.py --out out/demo
 
 test: $(STAMP)
 	BLENDER_USER_RESOURCES=$$(mktemp -d) $(PY) -m pytest -q tests
@@ -24,7 +24,7 @@ bench: $(STAMP)
 	$(PY) bench/flatten_table.py
 
 package: $(STAMP)
-	$(PY) bench/../tools/package.py
+	$(PY) tools/package.py --out dist
 
 clean:
 	rm -rf $(VENV) out dist wheels
