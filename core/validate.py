@@ -43,7 +43,8 @@ def as_arrays(V, F):
     except (TypeError, ValueError) as exc:
         raise ConformalError(f"mesh arrays are not numeric: {exc}") from None
     if V.size == 0 or F.size == 0:
-        raise ConformalError("mesh is empty: it has no vertices or no faces")
+        raise ConformalError("mesh is empty: it has no vertices or no faces; give a mesh with at least "
+                             "one triangle")
     if V.ndim != 2 or V.shape[1] != 3:
         raise ConformalError(f"vertex array must have shape (n,3), got {V.shape}")
     if F.ndim != 2 or F.shape[1] != 3:
@@ -62,7 +63,7 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
                              "decimate it, or raise the size limit")
     if F.min() < 0 or F.max() >= n:
         bad = np.nonzero((F < 0).any(1) | (F >= n).any(1))[0]
-        raise ConformalError(f"mesh has {_plural(len(bad), 'face')} that refer to missing vertices "
+        raise ConformalError(f"mesh has {_plural(len(bad), 'face')} with indices of missing vertices "
                              f"(faces {_examples(bad)}): face indices must lie in 0..{n - 1}")
     finite = np.isfinite(V).all(axis=1)
     if not finite.all():

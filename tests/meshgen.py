@@ -80,3 +80,33 @@ def coverage(uv, F, res=256, eps=1e-9):
     inside = ((s1 > eps) & (s2 > eps) & (s3 > eps)) | ((s1 < -eps) & (s2 < -eps) & (s3 < -eps))
     key = px[inside] * (res + 10) + py[inside]
     return np.unique(key, return_counts=True)[1]
+
+
+def torus(n_u=24, n_v=12, R=1.0, r=0.35):
+    """Closed torus (genus 1): ``V`` (n_u*n_v,3), ``F`` (2*n_u*n_v,3) counter-clockwise from outside."""
+    u = 2 * np.pi * np.arange(n_u) / n_u
+    v = 2 * np.pi * np.arange(n_v) / n_v
+    U, W = np.meshgrid(u, v, indexing='ij')
+    V = np.stack([(R + r * np.cos(W)) * np.cos(U), (R + r * np.cos(W)) * np.sin(U), r * np.sin(W)],
+                 -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n_u), np.arange(n_v), indexing='ij')
+    a = (i * n_v + j).ravel()
+    b = (((i + 1) % n_u) * n_v + j).ravel()
+    c = (((i + 1) % n_u) * n_v + (j + 1) % n_v).ravel()
+    d = (i * n_v + (j + 1) % n_v).ravel()
+    F = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.int64)
+    return V, F
+
+
+def needle_mesh(eps, name='bump', n=9):
+    """Height field with one quad replaced by four triangles around a vertex at relative distance
+    ``eps`` from the middle of the quad's first edge: the triangle on that edge is a needle of aspect
+    about 1/eps (a genuine, valid triangle for eps > 0; zero area for eps = 0)."""
+    V, F = make_surface(name, n)
+    i = j = n // 3
+    a, b, c, d = i * n + j, i * n + j + 1, (i + 1) * n + j + 1, (i + 1) * n + j
+    F = F[~(np.isin(F, [a, b, c, d]).sum(1) == 3)]
+    mid, cen = 0.5 * (V[a] + V[b]), V[[a, b, c, d]].mean(0)
+    p = mid + eps * np.linalg.norm(V[b] - V[a]) * (cen - mid) / np.linalg.norm(cen - mid)
+    q = len(V)
+    return np.vstack([V, p]), np.vstack([F, [[a, b, q], [b, c, q], [c, d, q], [d, a, q]]]).astype(np.int64)
