@@ -23,7 +23,7 @@ import numpy as np
 from .errors import ConformalError
 from .geometry import angle_sums, face_areas
 from .laplacian import cotan_laplacian, face_gradients, gradient, divergence
-from .measures import uv_measures, conformal_factor
+from .measures import uv_measures, conformal_factor, local_frames, jacobians_from_frames
 from .solve import Factor
 from .validate import check_mesh, DEFAULT_MAX_FACES
 
@@ -135,6 +135,12 @@ class DiskSystem:
         y = self.conjugate(x)
         y += np.mean(P[:, 1] - y[self.B])
         return np.stack([x, y], axis=1)
+
+    def jacobians(self, uv):
+        """Per-triangle Jacobians (m,2,2) of a UV map (n,2); the triangles' own frames are cached."""
+        if getattr(self, '_frames', None) is None:
+            self._frames, _ = local_frames(self.V, self.F)
+        return jacobians_from_frames(self._frames, self.F, uv)
 
     def map_from_u(self, u):
         """UV (n,2) of the conformal map with log scale factor ``u`` (n,)."""

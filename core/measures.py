@@ -15,18 +15,29 @@ def _local_frames(P):
     return Q, 0.5 * dbl
 
 
-def jacobians(V, F, UV):
-    """Per-triangle 2x2 Jacobians (m,2,2) from each triangle's own plane to the UV plane, and the
-    3D areas (m,)."""
+def local_frames(V, F):
+    """Each triangle in its own plane: corner 0 at the origin, corner 1 on the x axis. Returns
+    (p, q, r) (m,) each, with corners at (0,0), (p,0), (q,r), and the areas (m,)."""
     Q, A = _local_frames(V[F])
-    # the local frame puts corner 0 at the origin and corner 1 on the x axis: dP = [[p, q], [0, r]]
-    p, q, r = Q[:, 1, 0], Q[:, 2, 0], Q[:, 2, 1]
+    return (Q[:, 1, 0], Q[:, 2, 0], Q[:, 2, 1]), A
+
+
+def jacobians_from_frames(frames, F, UV):
+    """Per-triangle 2x2 Jacobians (m,2,2) to the UV plane, from ``local_frames``' (p, q, r)."""
+    p, q, r = frames
     W = UV[F]
     d1, d2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
     J = np.empty((len(F), 2, 2))
     J[:, :, 0] = d1 / p[:, None]
     J[:, :, 1] = (d2 - J[:, :, 0] * q[:, None]) / r[:, None]
-    return J, A
+    return J
+
+
+def jacobians(V, F, UV):
+    """Per-triangle 2x2 Jacobians (m,2,2) from each triangle's own plane to the UV plane, and the
+    3D areas (m,)."""
+    frames, A = local_frames(V, F)
+    return jacobians_from_frames(frames, F, UV), A
 
 
 def singular_values(J):

@@ -21,11 +21,12 @@ from scipy.optimize import linprog
 import scipy.sparse as sp
 
 from .errors import ConformalError
-from .measures import jacobians, singular_values
+from .measures import singular_values
 
 
 def _qc_mean(system, uv):
-    J, A = jacobians(system.V, system.F, uv)
+    J = system.jacobians(uv)
+    A = system.A
     s = singular_values(J)
     qc = s[:, 0] / np.maximum(s[:, 1], np.finfo(float).tiny)
     return float((qc * A).sum() / A.sum())
@@ -52,29 +53,58 @@ def boundary_basis(system, n_freq):
 
 
 def _minmax_lp(s, J, c, delta, reg_w):
-    """Solve min (t1 - t0) + reg . |a - c| s.t. t0 <= s + J (a - c) <= t1, |a - c| <= delta.
-    s (r,), J (r,K), c (K,). Variables: d+ (K), d- (K) in [0, delta], t1, t0, with a = c + d+ - d-.
-    Returns (a (K,), predicted spread) or (None, None)."""
+    """Solve min (t1 - t0) [+ reg . |a - c|] s.t. t0 <= s + J (a - c) <= t1 and |a - c| <= delta
+    (a box: the trust region). s (r,), J (r,K), c (K,). Without ``reg_w`` the variables are d = a - c
+    (bounded), t1, t0; with it d = d+ - d-. Returns (a (K,), predicted spread) or (None, None)."""
     r, K = J.shape
     one = np.ones((r, 1))
     zero = np.zeros((r, 1))
-    A_ub = np.vstack([np.hstack([J, -J, -one, zero]), np.hstack([-J, J, zero, one])])
-    b_ub = np.r_[-s, s]
-    cost = np.r_[reg_w, reg_w, 1.0, -1.0]
-    bounds = [(0, delta)] * (2 * K) + [(None, None)] * 2
-    res = linprog(cost, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method='highs-ds')
+    if reg_w is None:
+        A_ub = np.vstack([np.hstack([J, -one, zero]), np.hstack([-J, zero, one])])
+        cost = np.r_[np.zeros(K), 1.0, -1.0]
+        bounds = [(-delta, delta)] * K + [(None, None)] * 2
+    else:
+        A_ub = np.vstack([np.hstack([J, -J, -one, zero]), np.hstack([-J, J, zero, one])])
+        cost = np.r_[reg_w, reg_w, 1.0, -1.0]
+        bounds = [(0, delta)] * (2 * K) + [(None, None)] * 2
+    res = linprog(cost, A_ub=A_ub, b_ub=np.r_[-s, s], bounds=bounds, method='highs-ds',
+                  options=dict(presolve=False))
     if res.status != 0:
         return None, None
-    return c + res.x[:K] - res.x[K:2 * K], res.x[2 * K] - res.x[2 * K + 1]
+    d = res.x[:K] if reg_w is None else res.x[:K] - res.x[K:2 * K]
+    return c + d, res.x[-2] - res.x[-1]
 
 
-def optimise(system, n_freq=None, max_iter=40, qc_slack=None, active=200, reg=1e-3, progress=None):
+def _model_lp(s, JF, c, delta, reg_w, active, max_rounds=5):
+    """Minimise the spread of the linear model ``s + JF (a - c)`` over all faces by an active set of
+    rows: start from the ``active`` lowest and highest faces, add the faces the model says exceed the
+    current bounds. Returns (a, predicted spread) or (None, None)."""
+    order = np.argsort(s)
+    k = min(active, len(s))
+    rows = np.unique(np.r_[order[:k], order[-k:]])
+    for _ in range(max_rounds):
+        a, predicted = _minmax_lp(s[rows], JF[rows], c, delta, reg_w)
+        if a is None:
+            return None, None
+        model = s + JF @ (a - c)
+        lo, hi = model[rows].min(), model[rows].max()
+        out = np.nonzero((model > hi + 1e-9) | (model < lo - 1e-9))[0]
+        if len(out) == 0:
+            return a, predicted
+        worst = out[np.argsort(-np.maximum(model[out] - hi, lo - model[out]))[:2 * k]]
+        rows = np.union1d(rows, worst)
+    return a, float(model.max() - model.min())
+
+
+def optimise(system, n_freq=None, max_iter=12, max_maps=16, qc_slack=None, active=200, reg=1e-3,
+             progress=None):
     """Maximise the realised ``min mu / max mu`` over smooth boundary scale factors.
 
     system: ``DiskSystem``. n_freq: Fourier modes of u_B (default grows with the boundary length, at
-    most 24). qc_slack: allowed rise of the area-weighted mean quasi-conformal distortion over the
-    ``area`` map (default: half its excess over 1, at least 0.002). active: faces per side kept in each
-    LP. reg: weight of the smoothness term (per unit of |coefficient| times frequency).
+    most 24). max_iter: outer steps (each builds at most three maps); max_maps: maps built in all. qc_slack: allowed rise of the
+    area-weighted mean quasi-conformal distortion over the ``area`` map (default: half its excess over
+    1, at least 0.002). active: faces per side the LP starts from. reg: weight of the step-length
+    term (per unit of |coefficient| times frequency, relative to the spread).
     Returns ``u`` (n,), ``uv`` (n,2) and a dict for the report."""
     progress = progress or (lambda f, msg: None)
     nb = len(system.B)
@@ -91,48 +121,48 @@ def optimise(system, n_freq=None, max_iter=40, qc_slack=None, active=200, reg=1e
     if qc_slack is None:
         qc_slack = max(0.5 * (qc0 - 1.0), 0.002)
     qc_budget = qc0 + qc_slack
+    progress(0.15, 'boundary response')
     H = system.harmonic(Phi)                          # (n, K): response of u to the coefficients
     JF = H[system.F].mean(axis=1)                     # (m, K): linear model of s_T
-    c = np.zeros(Phi.shape[1])
-    best = dict(c=c, u=u0, uv=uv0, s=s0, spread=float(s0.max() - s0.min()), qc=qc0)
-    delta = 0.5 * best['spread'] + 1e-3
-    reg_w = reg * best['spread'] * freq
-    it, accepted = 0, 0
+    best = dict(c=np.zeros(Phi.shape[1]), u=u0, uv=uv0, s=s0, spread=float(s0.max() - s0.min()),
+                qc=qc0)
+    delta = best['spread']
+    reg_w = reg * best['spread'] * freq if reg else None
+    it, maps = 0, 0
     for it in range(1, max_iter + 1):
-        progress(0.1 + 0.8 * it / max_iter, f'optimising boundary scale ({it})')
-        s = best['s']
-        m = len(s)
-        k = min(active, m)
-        order = np.argsort(s)
-        rows = np.unique(np.r_[order[:k], order[-k:]])
-        a, predicted = _minmax_lp(s[rows], JF[rows], best['c'], delta, reg_w)
-        if a is None or best['spread'] - predicted < 1e-5:
+        progress(0.2 + 0.7 * it / max_iter, f'optimising boundary scale ({it})')
+        a, predicted = _model_lp(best['s'], JF, best['c'], delta, reg_w, active)
+        if a is None or best['spread'] - predicted < 1e-5 or maps >= max_maps:
             break
-        u = u0 + H @ a
-        try:
-            uv = system.map_from_u(u)
-        except ConformalError:
-            uv = None
-        s_new = _face_log_scale(system, uv) if uv is not None else None
-        ok = False
-        if s_new is not None:
+        accepted = False
+        for t in (1.0, 0.5, 0.25):
+            cand = best['c'] + t * (a - best['c'])
+            u = u0 + H @ cand
+            maps += 1
+            try:
+                uv = system.map_from_u(u)
+            except ConformalError:
+                continue
+            s_new = _face_log_scale(system, uv)
+            if s_new is None:
+                continue
             spread = float(s_new.max() - s_new.min())
-            if spread < best['spread'] - 1e-6:
-                qc = _qc_mean(system, uv)
-                if qc <= qc_budget:
-                    best = dict(c=a, u=u, uv=uv, s=s_new, spread=spread, qc=qc)
-                    ok = True
-        if ok:
-            accepted += 1
-            delta *= 1.5
-        else:
-            delta *= 0.4
-        if delta < 1e-4:
+            if spread >= best['spread'] - 1e-6:
+                continue
+            qc = _qc_mean(system, uv)
+            if qc > qc_budget:
+                continue
+            best = dict(c=cand, u=u, uv=uv, s=s_new, spread=spread, qc=qc)
+            accepted = True
             break
+        if not accepted:
+            delta *= 0.25
+            if delta < 1e-3 * best['spread']:
+                break
     opt = {
         'ratio_area_mode': float(np.exp(-(s0.max() - s0.min()))),
         'iterations': it,
-        'accepted_steps': accepted,
+        'maps_built': maps,
         'basis_size': int(Phi.shape[1]),
         'qc_budget': round(qc_budget, 5),
     }
