@@ -31,7 +31,7 @@ from .errors import ConformalError
 from .geometry import face_areas
 from .measures import uv_measures
 from . import topology
-from .validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, check_loose_edges
+from .validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, check_loose_edges, normalise_scale
 
 HOLE_MODES = ('fill', 'cut', 'error')
 ISLAND_SCALES = ('true', 'normalise')
@@ -407,6 +407,8 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='tru
     t0 = time.perf_counter()
     V, F = as_arrays(V, F)
     check_mesh(V, F, kind='surface', max_faces=max_faces, allow_loose=allow_loose, allow_parts=True)
+    # work in O(1) units whatever the mesh's (no under- or overflow); UVs are scaled back at the end
+    V, unit = normalise_scale(V)
     if edges is not None:
         check_loose_edges(edges, F)
     n, m = len(V), len(F)
@@ -495,6 +497,10 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='tru
             uv[lo:hi] += off[k]
     if fit == 'unit_square':
         uv /= max(layout) if max(layout) > 0 else 1.0
+    else:
+        uv *= unit
+    for r in reports:
+        r['area_3d'] *= unit * unit
     keep = good[cut.vert_island]
     uv[~keep] = 0.0
     rep_ok = [r for r in reports if 'error' not in r]

@@ -76,9 +76,10 @@ def _choose_quad_diagonals(tri, tri_poly, first, sizes, start, corner_verts, V):
     flip = np.zeros(len(quads), bool)
     if V is not None:
         V = np.asarray(V, np.float64)
-        cos_ac = _quad_normal_cos(V[a], V[b], V[c], V[d])
-        cos_bd = _quad_normal_cos(V[b], V[c], V[d], V[a])
-        flip = (cos_ac <= 0) & (cos_bd > cos_ac)
+        with np.errstate(all='ignore'):          # NaN or huge coordinates: keep a-c (checked later)
+            cos_ac = _quad_normal_cos(V[a], V[b], V[c], V[d])
+            cos_bd = _quad_normal_cos(V[b], V[c], V[d], V[a])
+            flip = (cos_ac <= 0) & (cos_bd > cos_ac)
     n = int(corner_verts.max()) + 1
     nxt = np.arange(len(corner_verts)) + 1
     ends = start + sizes
@@ -124,15 +125,19 @@ def triangulate(corner_verts, sizes, V=None):
         for p in np.nonzero(sizes >= 5)[0].tolist():
             c = np.arange(start[p], start[p] + sizes[p])
             Q = V[corner_verts[c]]
-            nrm = np.cross(Q - Q.mean(0), np.roll(Q, -1, 0) - Q.mean(0)).sum(0)
-            if np.linalg.norm(nrm) == 0:
-                continue
-            nrm /= np.linalg.norm(nrm)
-            ax = np.cross(nrm, [1.0, 0, 0]) if abs(nrm[0]) < 0.9 else np.cross(nrm, [0, 1.0, 0])
-            ax /= np.linalg.norm(ax)
-            ay = np.cross(nrm, ax)
-            P2 = np.c_[Q @ ax, Q @ ay]
-            local = _ear_clip(P2)
+            with np.errstate(all='ignore'):      # NaN or huge coordinates: keep the fan
+                nrm = np.cross(Q - Q.mean(0), np.roll(Q, -1, 0) - Q.mean(0)).sum(0)
+                length = np.linalg.norm(nrm)
+                if not (np.isfinite(length) and length > 0):
+                    continue
+                nrm /= length
+                ax = np.cross(nrm, [1.0, 0, 0]) if abs(nrm[0]) < 0.9 else np.cross(nrm, [0, 1.0, 0])
+                ax /= np.linalg.norm(ax)
+                ay = np.cross(nrm, ax)
+                P2 = np.c_[Q @ ax, Q @ ay]
+                if not np.isfinite(P2).all():
+                    continue
+                local = _ear_clip(P2)
             rows = np.nonzero(tri_poly == p)[0]
             tri[rows] = c[local]
     return tri, tri_poly

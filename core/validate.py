@@ -32,7 +32,7 @@ def _examples(idx, k=5):
 def _plural(n, word):
     if n == 1:
         return f"1 {word}"
-    return f"{n} {word[:-1]}ices" if word.endswith('vertex') else f"{n} {word}s"
+    return f"{n} {word[:-2]}ices" if word.endswith('vertex') else f"{n} {word}s"
 
 
 def as_arrays(V, F):
@@ -50,6 +50,19 @@ def as_arrays(V, F):
     if F.ndim != 2 or F.shape[1] != 3:
         raise ConformalError(f"face array must have shape (m,3) triangles, got {F.shape}")
     return V, F
+
+
+def normalise_scale(V):
+    """``V`` (n,3) finite, moved to the centre of its bounding box and divided by its largest half
+    extent, so that lengths are O(1) whatever the mesh's units (1e-100 or 1e100), without overflow.
+    Returns (``Vn`` (n,3) float64 in [-1,1]^3, ``size`` the half extent in mesh units, so that
+    ``V ~ centre + size * Vn``); a single point gives (``V``, 1.0)."""
+    lo, hi = V.min(0), V.max(0)
+    centre = lo / 2 + hi / 2
+    size = float(np.max(hi / 2 - lo / 2))
+    if not size > 0:
+        return V, 1.0
+    return (V / 2 - centre / 2) / size * 2, size
 
 
 def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False, allow_parts=False):
@@ -71,8 +84,9 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
         raise ConformalError(f"mesh has {_plural(len(bad), 'vertex')} with NaN or infinite coordinates "
                              f"(vertices {_examples(bad)}): fix or delete them")
     rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
-    A = face_areas(V, F)
-    el = np.linalg.norm(V[F[:, 1]] - V[F[:, 0]], axis=1)
+    Vn = normalise_scale(V)[0]            # the test must not under- or overflow at any mesh scale
+    A = face_areas(Vn, F)
+    el = np.linalg.norm(Vn[F[:, 1]] - Vn[F[:, 0]], axis=1)
     scale2 = max(float(np.mean(el)) ** 2, np.finfo(float).tiny)
     zero = rep | (A <= 1e-12 * scale2)
     if zero.any():

@@ -267,3 +267,13 @@ def test_cli_subprocess_no_traceback(tmp_path):
     assert p.returncode == 2
     assert p.stdout == '' and len(p.stderr.splitlines()) == 1 and 'Traceback' not in p.stderr
     assert 'non-manifold vertex' in p.stderr and not out.exists()
+
+
+def test_counts_in_messages_are_plural_words():
+    V, F = _grid()
+    V2 = np.vstack([V, [[-1.0, -2.5, 0], [-2.5, -1.0, 0], [5, -1, 0], [6, 0.5, 0]]])
+    F2 = np.vstack([F, [[0, 25, 26], [4, 27, 28]]])        # bow ties at corners 0 and 4
+    with pytest.raises(ConformalError, match=r'2 non-manifold vertices .*vertices 0, 4\)'):
+        check_mesh(V2, F2)
+    with pytest.raises(ConformalError, match=r'2 loose vertices'):
+        check_mesh(np.vstack([V, [[7.0, 7, 7], [8, 8, 8]]]), F)
