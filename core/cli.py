@@ -13,6 +13,7 @@ COMMANDS = {
     'flatten': ('cmd_flatten', 'flatten a disk mesh conformally and write an OBJ with UVs'),
     'make-surface': ('cmd_surface', 'write one of the test surfaces (DESIGN.md section 7)'),
     'unwrap': ('cmd_unwrap', 'cut a mesh into islands along seams, flatten and pack them, write per-corner UVs'),
+    'sphere': ('cmd_sphere', 'map a closed genus-0 mesh conformally to the unit sphere (OBJ out)'),
 }
 
 

@@ -1,0 +1,349 @@
+"""Sphere mode: conformal map of a closed genus-0 mesh to the unit sphere (DESIGN.md section 5).
+
+Method (why this one)
+---------------------
+A puncture-and-solve method in the spirit of Angenent/Haker and Choi-Lam-Lui (FLASH), built so that
+only the 3D mesh's cotan Laplacian is ever solved or divided by:
+
+1. Remove one well-shaped triangle ``T1`` (largest smallest angle). The rest is a disk whose boundary
+   is ``T1``'s three vertices. Fix them at ``T1``'s own shape (mirrored, since the removed face becomes
+   the outer face) and solve the cotan Laplace equation for all other vertices (x and y at once, one
+   factorisation). A harmonic map with a triangular boundary is, away from the puncture, a conformal
+   map followed by one global affine map of the plane (the dipole at the puncture has a holomorphic
+   and an anti-holomorphic part; the fixed shape sets their ratio). We remove that affine part
+   exactly: the complex ``m`` of ``z -> z + m conj(z)`` that best cancels the per-triangle Beltrami
+   coefficients ``q/p`` (area weighted, each triangle normalised by ``|p|^2`` so that the huge
+   triangles near the puncture do not dominate), iterated twice.
+2. The map is still poor in the few rings around ``T1``. As in Choi-Lam-Lui's "south-pole step",
+   pick a well-shaped triangle ``T2`` on the opposite side (near the weighted median of the chart), move
+   to the other chart by the inversion ``w = 1 / (z - centroid(T2))`` (holomorphic, so nothing is lost),
+   and solve the cotan Laplace equation again with only ``T2``'s three vertices fixed at those values.
+   ``T2``'s neighbourhood was mapped accurately in step 1, so its fixed shape is right; ``T1``'s
+   neighbourhood is now interior and solved freely. The affine correction is applied again.
+3. Scale the chart so that half the surface area lies in each hemisphere and project to the sphere
+   with the orientation-preserving inverse stereographic projection.
+
+Why it is robust: both steps are linear solves with the 3D cotan Laplacian (SPD once three vertices are
+fixed), so nothing depends on the size of triangles in a chart. The popular Python port of Choi-Lam-
+Lui's method computes a Beltrami coefficient in the polar chart and fails when genuine triangles there
+are smaller than a fixed area tolerance; there is no such tolerance here. Needle triangles make some
+cotan weights negative, which can fold a few triangles (cheburashka: see bench/sphere.py); the measures
+report them.
+
+Then ``core.moebius`` chooses the Moebius transformation (``none``, ``center``, ``area``, ``uniform``).
+
+Measures (as ``tools/measure.py sphere``): per triangle, ``mu = sqrt(area of the flat triangle of the
+mapped vertices / 3D area)``, normalised so that the totals agree; ``qc`` from the 2x2 Jacobian between
+the triangle's plane and the mapped triangle's plane; a flip is a mapped normal pointing inwards.
+"""
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .errors import ConformalError
+from .geometry import corner_angles, face_areas
+from .laplacian import cotan_laplacian
+from .measures import summarise
+from .moebius import MOEBIUS_MODES, optimise
+from .solve import Factor
+from . import topology
+from .validate import check_mesh, DEFAULT_MAX_FACES
+
+
+@dataclass
+class SphereResult:
+    """``S`` (n,3) float64 unit-sphere positions per vertex; ``mu`` (m,) per-triangle conformal factor
+    (normalised, dimensionless); ``report`` dict: measures, Moebius info, timings (seconds)."""
+    S: np.ndarray
+    mu: np.ndarray
+    report: dict = field(default_factory=dict)
+
+
+# --- small helpers ----------------------------------------------------------------------------------
+def _frames(P):
+    """Triangles P (m,3,3) -> their corners in the triangle's own plane as complex numbers (m,3)
+    (corner 0 at 0, corner 1 on the positive real axis) and the areas (m,)."""
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    nrm = np.cross(e1, e2)
+    dbl = np.linalg.norm(nrm, axis=1)
+    l1 = np.linalg.norm(e1, axis=1)
+    x = (e1 * e2).sum(1) / np.maximum(l1, np.finfo(float).tiny)
+    y = dbl / np.maximum(l1, np.finfo(float).tiny)
+    Z = np.zeros((len(P), 3), complex)
+    Z[:, 1] = l1
+    Z[:, 2] = x + 1j * y
+    return Z, 0.5 * dbl
+
+
+def _weighted_median(x, w):
+    order = np.argsort(x)
+    cw = np.cumsum(w[order])
+    return x[order][np.searchsorted(cw, 0.5 * cw[-1])]
+
+
+def _ring_levels(F, n, seed, k):
+    """(n,) int: ring distance (0..k) of each vertex from the vertices ``seed``, -1 beyond k rings."""
+    i = np.r_[F.ravel(), F[:, [1, 2, 0]].ravel()]
+    j = np.r_[F[:, [1, 2, 0]].ravel(), F.ravel()]
+    adj = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    level = np.full(n, -1)
+    level[seed] = 0
+    mask = level == 0
+    for r in range(1, k + 1):
+        new = (adj @ mask.astype(float) > 0) & ~mask
+        if not new.any():
+            break
+        level[new] = r
+        mask |= new
+    return level
+
+
+def _patch(F, n, tri, kout):
+    """The faces within ``kout`` rings of triangle ``tri`` (3,) if they form a disk that leaves at
+    least half of the vertices outside (3 for one ring); else None. Returns (level (n,), vertex ids (k,), faces (f,3)
+    renumbered)."""
+    level = _ring_levels(F, n, tri, kout)
+    inside = level >= 0
+    if inside.sum() > (n // 2 if kout > 1 else n - 3):
+        return None
+    fmask = inside[F].all(1)
+    idx = np.nonzero(inside)[0]
+    remap = -np.ones(n, np.int64)
+    remap[idx] = np.arange(len(idx))
+    Fp = remap[F[fmask]]
+    used = np.zeros(len(idx), bool)
+    used[Fp.ravel()] = True
+    if not used.all() or topology.euler_characteristic(Fp) != 1 or \
+            len(topology.boundary_loops(Fp, len(idx))) != 1:
+        return None
+    return level, idx, Fp
+
+
+def to_sphere(w):
+    """Orientation-preserving inverse stereographic projection of ``w`` (k,) complex: 0 -> north pole
+    (0,0,1), infinity -> south pole. Returns (k,3) unit vectors."""
+    r2 = (w * np.conj(w)).real
+    d = 1.0 + r2
+    return np.stack([2.0 * w.real / d, 2.0 * w.imag / d, (1.0 - r2) / d], axis=1)
+
+
+def from_sphere(S):
+    """Inverse of ``to_sphere``: ``w = (x + i y) / (1 + z)`` (k,) complex (infinite at the south pole)."""
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return (S[:, 0] + 1j * S[:, 1]) / (1.0 + S[:, 2])
+
+
+# --- the map ----------------------------------------------------------------------------------------
+RINGS = (6, 5, 4, 3, 2, 1)
+
+
+def conformal_sphere(V, F, progress=None):
+    """Conformal map of a closed genus-0 triangle mesh to the unit sphere (method in the module
+    docstring). ``V`` (n,3), ``F`` (m,3); the mesh must already pass ``check_mesh(kind='sphere')``.
+    Returns ``(S (n,3) unit vectors, info dict)``."""
+    from .flatten import flatten
+    report = progress or (lambda f, msg: None)
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    n = len(V)
+    A = face_areas(V, F)
+    L = cotan_laplacian(V, F)
+
+    # the pole: a well-shaped triangle whose neighbourhood is a disk
+    order = np.argsort(-corner_angles(V, F).min(1))
+    found = None
+    for kout in RINGS:
+        for t in order[:8].tolist():
+            pat = _patch(F, n, F[t], kout)
+            if pat is not None:
+                found = (t, kout, pat)
+                break
+        if found:
+            break
+    if found is None:
+        t, kout = int(order[0]), 1
+        level = _ring_levels(F, n, F[t], 1)
+        pat = (level, np.nonzero(level >= 0)[0], None)
+    else:
+        t, kout, pat = found
+    level, idx, Fp = pat
+    kin = kout // 2
+
+    # local conformal coordinate around the pole and the singular part s = 1 / (f - f(pole))
+    report(0.05, 'local chart at the pole')
+    if Fp is not None:
+        f = flatten(V[idx], Fp, boundary='area').uv
+        f = f[:, 0] + 1j * f[:, 1]
+    else:                                    # tiny mesh: the tangent plane of the pole triangle
+        P = V[F[t]]
+        e1 = P[1] - P[0]
+        e1 /= np.linalg.norm(e1)
+        nrm = np.cross(P[1] - P[0], P[2] - P[0])
+        e2 = np.cross(nrm / np.linalg.norm(nrm), e1)
+        f = (V[idx] - P[0]) @ e1 + 1j * ((V[idx] - P[0]) @ e2)
+    s = np.zeros(n, complex)
+    pos = np.searchsorted(idx, F[t])
+    s[idx] = 1.0 / (f - f[pos].mean())
+
+    # L z = b: z - s discretely harmonic near the pole, z harmonic elsewhere
+    near = (level >= 0) & (level <= kin)
+    b = np.zeros(n, complex)
+    b[near] = (L @ s)[near]
+    M = np.bincount(F.ravel(), np.repeat(A / 3.0, 3), minlength=n)
+    b[near] -= b.sum() * M[near] / M[near].sum()
+    pin = int(np.argmax(np.linalg.norm(V - V[F[t]].mean(0), axis=1)))
+    keep = np.arange(n) != pin
+    report(0.2, 'solving the Laplace equation')
+    sol = Factor(L[keep][:, keep]).solve(np.stack([b.real[keep], b.imag[keep]], 1))
+    z = np.zeros(n, complex)
+    z[keep] = sol[:, 0] + 1j * sol[:, 1]
+
+    # centre, half the area in each hemisphere, project
+    cz = z[F].mean(1)
+    z = z - (_weighted_median(cz.real, A) + 1j * _weighted_median(cz.imag, A))
+    z = z / _weighted_median(np.abs(z[F].mean(1)), A)
+    return to_sphere(z), {'pole_triangle': int(t), 'pole_rings': int(kout)}
+
+
+def sphere_measures(V, F, S, per_face=False):
+    """DESIGN.md section 3 measures of a map to the sphere (as ``tools/measure.py sphere``): dict with
+    faces, flips, mu_ratio, mu_ratio_p1_p99, qc_mean, qc_max. ``S`` (n,3) is normalised first. With
+    ``per_face``, also returns ``(mu (m,), qc (m,), flipped (m,) bool)``."""
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    S = np.asarray(S, np.float64)
+    S = S / np.linalg.norm(S, axis=1)[:, None]
+    Z3, A3 = _frames(V[F])
+    T = S[F]
+    Zs, _ = _frames(T)
+    nrm = np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0])
+    orient = (nrm * T.mean(1)).sum(1)
+    # Jacobian J = dQ dP^-1 from the 3D triangle's plane to the sphere triangle's plane; both frames
+    # put corner 1 on the x axis, so dP = [[x1, x2], [0, y2]] is upper triangular
+    x1, x2, y2 = Z3[:, 1].real, Z3[:, 2].real, np.maximum(Z3[:, 2].imag, np.finfo(float).tiny)
+    X1, X2, Y2 = Zs[:, 1].real, Zs[:, 2].real, Zs[:, 2].imag
+    x1 = np.maximum(x1, np.finfo(float).tiny)
+    a = X1 / x1
+    b = (X2 - a * x2) / y2
+    d = Y2 / y2                               # J = [[a, b], [0, d]]
+    det = np.abs(a * d)
+    fro = a * a + b * b + d * d
+    disc = np.sqrt(np.maximum(fro * fro - 4.0 * det * det, 0.0))
+    s1 = np.sqrt(0.5 * (fro + disc))
+    s2 = np.sqrt(np.maximum(0.5 * (fro - disc), 0.0))
+    s2 = np.maximum(s2, det / np.maximum(s1, np.finfo(float).tiny))   # accurate small singular value
+    c = np.sqrt((det * A3).sum() / A3.sum())
+    mu = np.sqrt(det) / c
+    qc = s1 / np.maximum(s2, np.finfo(float).tiny)
+    out = summarise(mu, qc, A3, orient)
+    if per_face:
+        return out, (mu, qc, orient <= 0)
+    return out
+
+
+def sphere_map(V, F, moebius='uniform', max_faces=DEFAULT_MAX_FACES, progress=None, **options):
+    """Map a closed genus-0 triangle mesh conformally to the unit sphere and choose the Moebius
+    transformation. ``V`` (n,3) float, ``F`` (m,3) int counter-clockwise; ``moebius`` one of
+    ``MOEBIUS_MODES``; ``progress(fraction, message)`` optional. Extra ``options`` go to
+    ``core.moebius.optimise``. Returns ``SphereResult``; raises ``ConformalError`` on bad input
+    (open mesh, higher genus, degenerate faces...)."""
+    if moebius not in MOEBIUS_MODES:
+        raise ConformalError(f"unknown Moebius mode {moebius!r}: use one of {', '.join(MOEBIUS_MODES)}")
+    report_progress = progress or (lambda f, msg: None)
+    t0 = time.perf_counter()
+    check_mesh(V, F, kind='sphere', max_faces=max_faces)
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    timings = {'check': time.perf_counter() - t0}
+    t = time.perf_counter()
+    S, info = conformal_sphere(V, F, progress=lambda f, m: report_progress(0.5 * f, m))
+    timings['map'] = time.perf_counter() - t
+    t = time.perf_counter()
+    A = face_areas(V, F)
+    S, minfo = optimise(S, F, A, mode=moebius,
+                        progress=lambda f, m: report_progress(0.5 + 0.45 * f, m), **options)
+    timings['moebius'] = time.perf_counter() - t
+    report_progress(0.95, 'measuring')
+    meas, (mu, qc, flipped) = sphere_measures(V, F, S, per_face=True)
+    report = {'moebius': moebius, 'vertices': len(V), 'faces': len(F)}
+    report.update(meas)
+    report['flipped_faces'] = np.nonzero(flipped)[0].tolist()
+    report['moebius_point'] = [round(x, 9) for x in minfo['c']]
+    if 'baselines' in minfo:
+        report['baselines'] = minfo['baselines']
+    report.update({k: v for k, v in info.items()})
+    timings['total'] = time.perf_counter() - t0
+    report['seconds'] = {k: round(v, 4) for k, v in timings.items()}
+    return SphereResult(S=S, mu=mu, report=report)
+
+
+# --- test shapes --------------------------------------------------------------------------------------
+def icosphere(freq=8):
+    """Geodesic sphere: each icosahedron face split into ``freq**2`` triangles, projected to the unit
+    sphere. Returns ``V`` (10 freq^2 + 2, 3) and ``F`` (20 freq^2, 3), counter-clockwise seen from
+    outside."""
+    k = int(freq)
+    if k < 1:
+        raise ConformalError("icosphere frequency must be at least 1")
+    g = (1 + 5 ** 0.5) / 2
+    P = np.array([[-1, g, 0], [1, g, 0], [-1, -g, 0], [1, -g, 0], [0, -1, g], [0, 1, g],
+                  [0, -1, -g], [0, 1, -g], [g, 0, -1], [g, 0, 1], [-g, 0, -1], [-g, 0, 1]], float)
+    T = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+                  [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    ii, jj = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing='ij')
+    keep = ii + jj <= k
+    ii, jj = ii[keep], jj[keep]
+    idx = -np.ones((k + 1, k + 1), np.int64)
+    idx[ii, jj] = np.arange(len(ii))
+    a, b = np.meshgrid(np.arange(k), np.arange(k), indexing='ij')
+    up = a + b <= k - 1
+    dn = a + b <= k - 2
+    loc = np.r_[np.stack([idx[a[up], b[up]], idx[a[up] + 1, b[up]], idx[a[up], b[up] + 1]], 1),
+                np.stack([idx[a[dn] + 1, b[dn]], idx[a[dn] + 1, b[dn] + 1], idx[a[dn], b[dn] + 1]], 1)]
+    w = np.stack([k - ii - jj, ii, jj], 1) / k
+    pts = np.einsum('pk,fkd->fpd', w, P[T]).reshape(-1, 3)
+    faces = (loc[None] + (np.arange(len(T)) * len(ii))[:, None, None]).reshape(-1, 3)
+    pts /= np.linalg.norm(pts, axis=1)[:, None]
+    _, first, inv = np.unique(np.round(pts, 9), axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    V = pts[first[order]]
+    F = rank[inv.ravel()][faces]
+    nrm = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    out = (nrm * V[F].mean(1)).sum(1) < 0
+    F[out] = F[out][:, ::-1]
+    return V, F
+
+
+def blob(freq=24, bumps=((0, 0, 1, 1.2), (1, 0, 0, 0.8), (0, -1, 0, 1.0), (-0.6, 0.6, -0.5, 0.9)),
+         width=0.12):
+    """Star-shaped sphere with protrusions: the icosphere scaled radially by ``1 + sum h_k exp(-(1 -
+    d_k . x) / width)`` for bumps ``(dx, dy, dz, h)``. Returns ``V``, ``F`` like ``icosphere``."""
+    V, F = icosphere(freq)
+    r = np.ones(len(V))
+    for dx, dy, dz, h in bumps:
+        d = np.array([dx, dy, dz], float)
+        d /= np.linalg.norm(d)
+        r += h * np.exp(-(1.0 - V @ d) / width)
+    return V * r[:, None], F
+
+
+def subdivide(V, F):
+    """Split every triangle into 4 at its edge midpoints (flat: the surface does not move). Returns
+    ``V2`` (n + e, 3) and ``F2`` (4m, 3); the first n vertices are the input's."""
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    n = len(V)
+    E = np.sort(np.stack([F, F[:, [1, 2, 0]]], 2).reshape(-1, 2), 1)
+    key, inv = np.unique(E[:, 0] * n + E[:, 1], return_inverse=True)
+    mid = n + inv.reshape(-1, 3)             # midpoint of edge (k, k+1) of each face
+    V2 = np.vstack([V, 0.5 * (V[key // n] + V[key % n])])
+    a, b, c = F.T
+    ab, bc, ca = mid.T
+    F2 = np.vstack([np.stack([a, ab, ca], 1), np.stack([ab, b, bc], 1), np.stack([ca, bc, c], 1),
+                    np.stack([ab, bc, ca], 1)])
+    return V2, F2

@@ -1,0 +1,195 @@
+"""Sphere mode: conformal map of closed genus-0 meshes to the unit sphere, Moebius normalisation,
+measures, CLI (issue 5)."""
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from core.errors import ConformalError
+from core.geometry import face_areas
+from core import moebius
+from core.sphere import (sphere_map, conformal_sphere, sphere_measures, icosphere, blob, subdivide,
+                         to_sphere, from_sphere)
+
+DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'data')
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _load(name):
+    d = np.load(os.path.join(DATA, f'sphere_{name}.npz'))
+    return d['V'].astype(np.float64), d['F'].astype(np.int64)
+
+
+def _torus(n=24, k=12, R=1.0, r=0.35):
+    i, j = np.meshgrid(np.arange(n), np.arange(k), indexing='ij')
+    u, v = 2 * np.pi * i.ravel() / n, 2 * np.pi * j.ravel() / k
+    V = np.stack([(R + r * np.cos(v)) * np.cos(u), (R + r * np.cos(v)) * np.sin(u), r * np.sin(v)], 1)
+    a = (i * k + j).ravel()
+    b = (((i + 1) % n) * k + j).ravel()
+    c = (((i + 1) % n) * k + (j + 1) % k).ravel()
+    d = (i * k + (j + 1) % k).ravel()
+    return V, np.r_[np.stack([a, b, c], 1), np.stack([a, c, d], 1)]
+
+
+# --- building blocks ------------------------------------------------------------------------------
+def test_icosphere_is_closed_genus0_and_outward():
+    V, F = icosphere(6)
+    assert len(V) == 10 * 36 + 2 and len(F) == 20 * 36
+    assert np.allclose(np.linalg.norm(V, axis=1), 1)
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    assert ((n * V[F].mean(1)).sum(1) > 0).all()
+    V2, F2 = subdivide(V, F)
+    assert len(F2) == 4 * len(F) and np.isclose(face_areas(V2, F2).sum(), face_areas(V, F).sum())
+
+
+def test_stereographic_round_trip_and_orientation():
+    w = np.array([0, 0.3 + 0.2j, -2 + 5j, 1e-6j, 40 - 1j])
+    S = to_sphere(w)
+    assert np.allclose(np.linalg.norm(S, axis=1), 1)
+    assert np.allclose(S[0], [0, 0, 1])
+    assert np.allclose(from_sphere(S), w, rtol=1e-9, atol=1e-15)
+    # a small counter-clockwise triangle in the chart stays counter-clockwise seen from outside
+    for w0 in (0.1 + 0.2j, 3 - 4j):
+        T = to_sphere(w0 + 1e-3 * np.array([0, 1, 1j]))
+        assert np.dot(np.cross(T[1] - T[0], T[2] - T[0]), T.mean(0)) > 0
+
+
+def test_ball_map_is_a_moebius_map_of_the_sphere():
+    rng = np.random.default_rng(1)
+    X = rng.normal(size=(200, 3))
+    X /= np.linalg.norm(X, axis=1)[:, None]
+    c = np.array([0.3, -0.5, 0.4])
+    Y = moebius.ball_map(c, X)
+    assert np.allclose(np.linalg.norm(Y, axis=1), 1)
+    assert np.allclose(moebius.ball_map(c, c[None]), 0, atol=1e-15)
+    assert np.allclose(moebius.ball_map(-c, Y), X)                 # inverse
+    # conformal factor of phi_c at x is the Poisson kernel (1-|c|^2)/|x-c|^2
+    x = X[0]
+    t1 = np.cross(x, [0.0, 0.0, 1.0])
+    t1 /= np.linalg.norm(t1)
+    eps = 1e-6
+    xe = (x + eps * t1) / np.linalg.norm(x + eps * t1)
+    ratio = np.linalg.norm(moebius.ball_map(c, xe[None])[0] - Y[0]) / np.linalg.norm(xe - x)
+    assert np.isclose(ratio, (1 - c @ c) / np.sum((x - c) ** 2), rtol=1e-5)
+    # composing two translations: compose_point moves the right point to the centre
+    c2 = np.array([-0.2, 0.1, 0.6])
+    p = moebius.compose_point([c, c2])
+    assert np.allclose(moebius.ball_map(c2, moebius.ball_map(c, p[None])), 0, atol=1e-12)
+
+
+def test_measures_of_the_identity_and_of_a_fold():
+    V, F = icosphere(5)
+    m = sphere_measures(V, F, V * 3.0)                               # scaled: normalised first
+    assert m['flips'] == 0 and np.isclose(m['mu_ratio'], 1) and np.isclose(m['qc_mean'], 1)
+    # stretch the sphere's preimage: mu and qc see it
+    W = V * np.array([2.0, 1.0, 1.0])
+    m = sphere_measures(W, F, V)
+    assert m['qc_max'] > 1.5 and m['mu_ratio'] < 0.75
+    # reflect one vertex through the centre: its faces point inwards
+    S = V.copy()
+    S[0] = -S[0]
+    m, (mu, qc, flipped) = sphere_measures(V, F, S, per_face=True)
+    assert m['flips'] == flipped.sum() > 0
+    assert set(np.nonzero(flipped)[0]) <= set(np.nonzero((F == 0).any(1))[0])
+
+
+# --- the map ----------------------------------------------------------------------------------------
+def test_icosphere_maps_to_itself():
+    V, F = icosphere(10)
+    res = sphere_map(V, F, moebius='uniform')
+    r = res.report
+    assert r['flips'] == 0 and r['qc_mean'] <= 1.005 and r['mu_ratio'] > 0.98
+    # the map is a rotation of the identity: corner angles are kept
+    from core.geometry import corner_angles
+    assert np.abs(corner_angles(res.S, F) - corner_angles(V, F)).max() < 0.02
+    assert np.allclose(np.linalg.norm(res.S, axis=1), 1)
+
+
+def test_refinement_converges():
+    """The map converges: qc_mean - 1 falls by about half per halving of the edge length (the floor
+    of any piecewise-linear map with a varying scale is O(h |grad log mu|))."""
+    V, F = blob(6)
+    q = []
+    for _ in range(2):
+        S, _ = conformal_sphere(V, F)
+        q.append(sphere_measures(V, F, S)['qc_mean'] - 1)
+        V, F = subdivide(V, F)
+    assert q[1] < 0.65 * q[0]
+
+
+def test_spot_all_modes():
+    V, F = _load('spot')
+    res = sphere_map(V, F, moebius='uniform')
+    r = res.report
+    assert r['flips'] == 0
+    assert r['qc_mean'] < 1.16                                       # native-resolution floor ~1.13
+    assert r['mu_ratio'] >= max(r['baselines'].values())
+    assert r['mu_ratio'] >= 1.3 * max(r['baselines']['center'], r['baselines']['area'])
+    for mode in ('none', 'center', 'area'):
+        rb = sphere_map(V, F, moebius=mode).report
+        assert rb['flips'] == 0
+        assert np.isclose(rb['mu_ratio'], r['baselines'][mode], rtol=1e-4)
+    assert res.mu.shape == (len(F),)
+
+
+def test_center_mode_centres_the_area_centroid():
+    V, F = blob(8)
+    res = sphere_map(V, F, moebius='center')
+    w = np.bincount(F.ravel(), np.repeat(face_areas(V, F) / 3, 3), minlength=len(V))
+    g = (w[:, None] * res.S).sum(0) / w.sum()
+    assert np.linalg.norm(g) < 1e-6
+
+
+def test_cheburashka_needles():
+    V, F = _load('cheburashka')
+    from core.geometry import corner_angles
+    assert np.degrees(corner_angles(V, F)).max() > 170
+    res = sphere_map(V, F, moebius='uniform')
+    r = res.report
+    assert r['flips'] < 0.005 * len(F)
+    assert len(r['flipped_faces']) == r['flips']
+    assert np.isfinite(res.S).all() and r['qc_mean'] < 1.5
+
+
+def test_bad_input():
+    V, F = _torus()
+    with pytest.raises(ConformalError, match='genus 1'):
+        sphere_map(V, F)
+    V, F = icosphere(3)
+    with pytest.raises(ConformalError, match='open'):
+        sphere_map(V, F[1:])
+    with pytest.raises(ConformalError, match='Moebius'):
+        sphere_map(V, F, moebius='best')
+
+
+def test_tiny_meshes():
+    for k in (1, 2):
+        V, F = icosphere(k)
+        r = sphere_map(V, F).report
+        assert r['flips'] == 0 and r['qc_mean'] < 1.5          # 12 and 42 vertices: coarse, but valid
+
+
+def test_cli(tmp_path):
+    from core.objio import write_obj, read_obj
+    V, F = blob(5)
+    src, out = tmp_path / 'in.obj', tmp_path / 'out.obj'
+    write_obj(str(src), V, F)
+    p = subprocess.run([sys.executable, '-m', 'core', 'sphere', str(src), str(out), '--moebius', 'center',
+                        '--json'], capture_output=True, text=True, cwd=ROOT)
+    assert p.returncode == 0, p.stderr
+    rep = json.loads(p.stdout)
+    assert rep['moebius'] == 'center' and rep['flips'] == 0
+    m = read_obj(str(out))
+    assert np.allclose(np.linalg.norm(m.V, axis=1), 1, atol=1e-8)
+    assert np.array_equal(m.triangles()[0], F)
+    assert np.isclose(sphere_measures(V, F, m.V)['mu_ratio'], rep['mu_ratio'], rtol=1e-5)
+    # an open mesh: exit 2, one line, no output file
+    write_obj(str(src), V, F[1:])
+    out2 = tmp_path / 'out2.obj'
+    p = subprocess.run([sys.executable, '-m', 'core', 'sphere', str(src), str(out2)],
+                       capture_output=True, text=True, cwd=ROOT)
+    assert p.returncode == 2 and p.stderr.count('\n') == 1 and 'closed' in p.stderr
+    assert not out2.exists()
