@@ -356,3 +356,71 @@ def test_report_and_summary(addon, bl):
     line = ops_flatten.summary_line(rep)
     assert 'mu ratio' in line and 'certified bound' in line and 'flips' in line
     assert ui.geodesic_solver_label()
+
+
+@pytest.mark.parametrize('mode', ['SCULPT', 'VERTEX_PAINT'])
+def test_other_modes_are_restored(addon, bl, mode):
+    obj, V, F = bump_object(bl)
+    bpy.ops.object.mode_set(mode=mode)
+    assert bpy.ops.uv.conformal_flatten(boundary='AREA') == {'FINISHED'}
+    assert obj.mode == mode
+    bpy.ops.object.mode_set(mode='OBJECT')
+    assert 'conformal_factor' in obj.data.attributes
+
+
+class FakeLayout:
+    """Records what a panel draws (UILayout cannot be created outside a UI)."""
+
+    def __init__(self, log):
+        self.log = log
+        self.use_property_split = False
+
+    def _sub(self, *a, **k):
+        return FakeLayout(self.log)
+    column = row = box = _sub
+
+    def label(self, text='', icon='NONE'):
+        self.log.append(('label', text))
+
+    def prop(self, data, name, **k):
+        assert hasattr(data, name), name
+        self.log.append(('prop', name))
+
+    def separator(self):
+        pass
+
+    def operator(self, idname, **k):
+        self.log.append(('operator', idname))
+        return type('OperatorProperties', (), {})()
+
+
+def test_panel_draws_report_and_sections(addon, bl):
+    from conformal_flatten.addon import ui
+    from conformal_flatten.addon.prefs import ConformalFlattenPreferences, get_prefs
+    obj, _, _ = bump_object(bl)
+    panel = ui.VIEW3D_PT_conformal_flatten
+    log = []
+    fake = type('P', (), {'layout': FakeLayout(log)})()
+    panel.draw(fake, bpy.context)
+    assert ('operator', 'uv.conformal_flatten') in log
+    assert ('label', "No flatten report for the active mesh") in log
+    bpy.ops.uv.conformal_flatten(boundary='AREA')
+    calls = []
+
+    def extra(layout, context):
+        calls.append(context)
+    ui.add_section("Extra", extra)
+    log.clear()
+    panel.draw(fake, bpy.context)
+    labels = [t for kind, t in log if kind == 'label']
+    assert "Mu ratio" in labels and "Flips" in labels and "Certified bound" in labels
+    assert any(t.startswith("Geodesic solver: ") for t in labels)
+    assert calls and "Extra" in labels
+    ui.remove_section(extra)
+    assert all(d is not extra for _, d in ui._sections)
+    prefs = get_prefs(bpy.context)
+    assert isinstance(prefs, ConformalFlattenPreferences)       # enabled: the real preferences
+    log.clear()
+    fake_prefs = type('P', (), {'layout': FakeLayout(log), 'grid_size': 0, 'colormap': 'GRAY'})()
+    ConformalFlattenPreferences.draw(fake_prefs, bpy.context)
+    assert ('prop', 'grid_size') in log and ('prop', 'colormap') in log
