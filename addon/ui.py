@@ -71,7 +71,7 @@ def geodesic_solver_label():
                 break
         if isinstance(value, str):
             return value
-    return "scikit-fmm" if importlib.util.find_spec('skfmm') else "built-in (no scikit-fmm)"
+    return "scikit-fmm" if importlib.util.find_spec('skfmm') else "built-in fast sweeping (no scikit-fmm)"
 
 
 FLATTEN_ROWS = [
