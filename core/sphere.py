@@ -1,34 +1,35 @@
 """Sphere mode: conformal map of a closed genus-0 mesh to the unit sphere (DESIGN.md section 5).
 
-Method (why this one)
----------------------
-A puncture-and-solve method in the spirit of Angenent/Haker and Choi-Lam-Lui (FLASH), built so that
-only the 3D mesh's cotan Laplacian is ever solved or divided by:
+Method: one cotan Laplace solve with the pole's singularity subtracted analytically
+---------------------------------------------------------------------------------
+In the stereographic chart that sends a point ``p`` of the surface to infinity, the conformal map to
+the sphere is a harmonic (indeed holomorphic) function ``z`` with a simple pole at ``p``: near ``p``,
+``z = a / (f - f(p)) + holomorphic``, where ``f`` is any local conformal coordinate.
 
-1. Remove one well-shaped triangle ``T1`` (largest smallest angle). The rest is a disk whose boundary
-   is ``T1``'s three vertices. Fix them at ``T1``'s own shape (mirrored, since the removed face becomes
-   the outer face) and solve the cotan Laplace equation for all other vertices (x and y at once, one
-   factorisation). A harmonic map with a triangular boundary is, away from the puncture, a conformal
-   map followed by one global affine map of the plane (the dipole at the puncture has a holomorphic
-   and an anti-holomorphic part; the fixed shape sets their ratio). We remove that affine part
-   exactly: the complex ``m`` of ``z -> z + m conj(z)`` that best cancels the per-triangle Beltrami
-   coefficients ``q/p`` (area weighted, each triangle normalised by ``|p|^2`` so that the huge
-   triangles near the puncture do not dominate), iterated twice.
-2. The map is still poor in the few rings around ``T1``. As in Choi-Lam-Lui's "south-pole step",
-   pick a well-shaped triangle ``T2`` on the opposite side (near the weighted median of the chart), move
-   to the other chart by the inversion ``w = 1 / (z - centroid(T2))`` (holomorphic, so nothing is lost),
-   and solve the cotan Laplace equation again with only ``T2``'s three vertices fixed at those values.
-   ``T2``'s neighbourhood was mapped accurately in step 1, so its fixed shape is right; ``T1``'s
-   neighbourhood is now interior and solved freely. The affine correction is applied again.
-3. Scale the chart so that half the surface area lies in each hemisphere and project to the sphere
-   with the orientation-preserving inverse stereographic projection.
+1. Pick a well-shaped triangle (largest smallest angle) whose k-ring neighbourhood (k <= 6) is a disk;
+   ``p`` is its centroid. Flatten that patch with the project's conformal flattening
+   (``core.flatten.flatten(boundary='area')``, BFF): ``f``. Set ``s = 1 / (f - f(p))`` on the patch.
+2. Solve ``L z = b`` on the closed mesh (``L`` the 3D cotan Laplacian, one vertex pinned, one
+   factorisation for x and y): within k/2 rings of ``p`` the *regular part* ``z - s`` is discretely
+   harmonic (``b_i = (L s)_i``), elsewhere ``z`` itself is (``b_i = 0``). The small sum of ``b``
+   (the discrete flux error of ``s``) is removed on the inner rings, so no logarithmic term appears.
+3. Centre the chart at its area-weighted median, scale it so that half the area lies in each
+   hemisphere, and project with the orientation-preserving inverse stereographic projection.
 
-Why it is robust: both steps are linear solves with the 3D cotan Laplacian (SPD once three vertices are
-fixed), so nothing depends on the size of triangles in a chart. The popular Python port of Choi-Lam-
-Lui's method computes a Beltrami coefficient in the polar chart and fails when genuine triangles there
-are smaller than a fixed area tolerance; there is no such tolerance here. Needle triangles make some
-cotan weights negative, which can fold a few triangles (cheburashka: see bench/sphere.py); the measures
-report them.
+Why this method: puncture methods (Angenent/Haker's dipole, Choi-Lam-Lui's fixed big triangle) leave
+the 1/w singularity to the piecewise-linear Laplacian. Its error is first order in the edge length
+and reaches the whole sphere: on a 2562-vertex icosphere a fixed-triangle puncture gave qc_mean 1.075
+and min/max mu 0.49 for what should be the identity. Choi-Lam-Lui repair the polar region with a
+Beltrami solve in a second chart; the widely used Python port divides by chart triangle areas there and
+fails with a fixed zero-area tolerance on fine meshes. Here the Laplacian only ever sees smooth
+functions: the same icosphere maps to itself with qc_mean 1.0007 and min/max mu 0.996, nothing is
+computed from chart areas, and no tolerance depends on absolute size. Needle triangles make some cotan
+weights negative, which can fold a few faces (cheburashka: about 0.3%); they are reported.
+
+The per-triangle measures have a floor for *any* piecewise-linear map whose scale varies: a triangle's
+qc is at least the ratio of its edges' scale factors, so qc_mean - 1 is of the order of
+``h |grad log mu|`` (h the edge length). Coarse meshes with protrusions (spot at 2930 vertices) cannot
+reach qc_mean 1.05; subdividing them halves qc_mean - 1 per level (bench/sphere.py shows it).
 
 Then ``core.moebius`` chooses the Moebius transformation (``none``, ``center``, ``area``, ``uniform``).
 
@@ -270,6 +271,8 @@ def sphere_map(V, F, moebius='uniform', max_faces=DEFAULT_MAX_FACES, progress=No
     report = {'moebius': moebius, 'vertices': len(V), 'faces': len(F)}
     report.update(meas)
     report['flipped_faces'] = np.nonzero(flipped)[0].tolist()
+    if flipped.any() and not flipped.all():
+        report['mu_ratio_oriented'] = float(mu[~flipped].min() / mu[~flipped].max())
     report['moebius_point'] = [round(x, 9) for x in minfo['c']]
     if 'baselines' in minfo:
         report['baselines'] = minfo['baselines']
