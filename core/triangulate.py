@@ -85,19 +85,28 @@ def _choose_quad_diagonals(tri, tri_poly, first, sizes, start, corner_verts, V):
     ends = start + sizes
     nxt[ends - 1] = start
     poly_edges = np.unique(_edge_keys(corner_verts, corner_verts[nxt], n))
+    # a repeated quad (the same four vertices) must stay a visible duplicate: it follows its original
+    _, qfirst, inv = np.unique(np.sort(np.stack([a, b, c, d], 1), axis=1), axis=0, return_index=True,
+                               return_inverse=True)
+    orig = qfirst[inv.ravel()]
+    dup = orig != np.arange(len(quads))
+    ac, bd = _edge_keys(a, c, n), _edge_keys(b, d, n)
     for _ in range(2):
-        diag = np.where(flip, _edge_keys(b, d, n), _edge_keys(a, c, n))
-        other = np.where(flip, _edge_keys(a, c, n), _edge_keys(b, d, n))
+        diag = np.where(flip, bd, ac)
+        other = np.where(flip, ac, bd)
         conflict = np.isin(diag, poly_edges)
-        _, inv, cnt = np.unique(diag, return_inverse=True, return_counts=True)
+        key = np.where(dup, -1 - np.arange(len(diag)), diag)      # duplicates do not count
+        _, kinv, cnt = np.unique(key, return_inverse=True, return_counts=True)
         order = np.arange(len(diag))
         first_of = np.full(len(cnt), len(diag))
-        np.minimum.at(first_of, inv, order)
-        conflict |= (cnt[inv] > 1) & (order != first_of[inv])
-        conflict &= ~np.isin(other, poly_edges)
+        np.minimum.at(first_of, kinv, order)
+        conflict |= (cnt[kinv] > 1) & (order != first_of[kinv])
+        conflict &= ~np.isin(other, poly_edges) & ~dup
         if not conflict.any():
             break
         flip ^= conflict
+    chosen = np.where(flip, bd, ac)
+    flip[dup] = ac[dup] != chosen[orig[dup]]
     r = first[quads[flip]]
     sq = s[flip]
     tri[r] = np.stack([sq + 1, sq + 2, sq + 3], axis=1)

@@ -277,3 +277,23 @@ def test_counts_in_messages_are_plural_words():
         check_mesh(V2, F2)
     with pytest.raises(ConformalError, match=r'2 loose vertices'):
         check_mesh(np.vstack([V, [[7.0, 7, 7], [8, 8, 8]]]), F)
+
+
+def test_quad_meshes_keep_their_defects_visible():
+    """Triangulating quads must neither hide a duplicate polygon nor invent one: a repeated quad
+    (in either orientation) is reported as a duplicate face, while two quads sharing two edges (a
+    vertex of valence 2, as in Suzanne's brows) triangulate without duplicates."""
+    from core.triangulate import triangulate
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0.5, 0], [-1, 0.5, 0]], float)
+    for dup in ([2, 3, 0, 1], [3, 2, 1, 0]):
+        cv = np.array([0, 1, 2, 3] + dup)
+        tri, _ = triangulate(cv, [4, 4], V)
+        with pytest.raises(ConformalError, match='duplicate face'):
+            check_mesh(V, cv[tri])
+    # quads (0,1,4,2) and (0,2,5,1)... a valence-2 vertex 1 shared by two quads along two edges
+    V2 = np.array([[0, 0, 0], [1, 0.05, 0], [2, 0, 0], [1, 1, 0], [1, -1, 0]], float)
+    cv = np.array([0, 1, 2, 3, 0, 4, 2, 1])
+    tri, _ = triangulate(cv, [4, 4], V2)
+    F = cv[tri]
+    from core import topology
+    assert len(topology.duplicate_rows(F)) == 0 and topology.unique_edges(F)[1].max() <= 2

@@ -1,0 +1,112 @@
+"""Bad input in the add-on (issue 7): every case the core rejects reaches the user as an ERROR report
+(a RuntimeError in scripts) naming the problem, and every data array of every mesh is bitwise
+unchanged, in Object and Edit mode. Complements tests/test_addon.py (closed mesh, two boundary
+loops, non-mesh object, no active object)."""
+import bpy
+import numpy as np
+import pytest
+
+from test_addon import _fails_unchanged
+
+
+def _grid(n=5):
+    t = np.linspace(-1, 1, n)
+    X, Y = np.meshgrid(t, t)
+    V = np.stack([X.ravel(), Y.ravel(), 0.3 * np.exp(-(X ** 2 + Y ** 2)).ravel()], 1)
+    polys = [[i * n + j, i * n + j + 1, (i + 1) * n + j + 1, (i + 1) * n + j]
+             for i in range(n - 1) for j in range(n - 1)]
+    return V, polys
+
+
+def _non_manifold_edge():
+    V, polys = _grid()
+    # a third face on the interior edge (6, 7) (shared by two quads of the grid)
+    return np.vstack([V, [[0.0, -0.5, 1.0]]]), polys + [[6, 7, 25]]
+
+
+def _non_manifold_vertex():
+    V, polys = _grid()
+    # a triangle touching the grid only at its corner vertex 0 (a bow tie)
+    return np.vstack([V, [[-1.5, -2.5, 0], [-2.5, -1.5, 0]]]), polys + [[0, 25, 26]]
+
+
+def _zero_area():
+    V, polys = _grid()
+    V = V.copy()
+    V[6] = V[7]                               # two corners of several quads coincide
+    return V, polys
+
+
+def _duplicate_face():
+    V, polys = _grid()
+    return V, polys + [list(polys[5])]
+
+
+def _loose_vertex():
+    V, polys = _grid()
+    return np.vstack([V, [[3.0, 3, 3]]]), polys
+
+
+CASES = {
+    'non_manifold_edge': (_non_manifold_edge, r'non-manifold edge'),
+    'non_manifold_vertex': (_non_manifold_vertex, r'non-manifold vertex'),
+    'zero_area': (_zero_area, r'zero-area'),
+    'duplicate_face': (_duplicate_face, r'duplicate face'),
+    'loose_vertex': (_loose_vertex, r'loose vert'),
+}
+
+
+@pytest.mark.parametrize('mode', ['OBJECT', 'EDIT'])
+@pytest.mark.parametrize('name', sorted(CASES))
+def test_bad_mesh_fails_unchanged(addon, bl, name, mode):
+    make, match = CASES[name]
+    V, polys = make()
+    obj = bl.mesh_object(name, V, polys)
+    obj.data.uv_layers.new(name='UVMap').uv.foreach_set(
+        'vector', np.linspace(0, 1, 2 * len(obj.data.loops), dtype=np.float32))
+    _fails_unchanged(bl, match, mode)
+
+
+@pytest.mark.parametrize('mode', ['OBJECT', 'EDIT'])
+@pytest.mark.parametrize('value', [np.nan, np.inf])
+def test_non_finite_coordinates_fail_unchanged(addon, bl, value, mode):
+    V, polys = _grid()
+    obj = bl.mesh_object('nan', V, polys)
+    pos = np.empty(3 * len(V), np.float32)
+    obj.data.attributes['position'].data.foreach_get('vector', pos)
+    pos[3 * 7 + 1] = value
+    obj.data.attributes['position'].data.foreach_set('vector', pos)
+    _fails_unchanged(bl, 'NaN or infinite', mode)
+
+
+@pytest.mark.parametrize('mode', ['OBJECT', 'EDIT'])
+def test_mesh_without_faces_fails_unchanged(addon, bl, mode):
+    me = bpy.data.meshes.new('wire')
+    me.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0)], [(0, 1), (1, 2)], [])
+    obj = bpy.data.objects.new('wire', me)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    _fails_unchanged(bl, 'no faces', mode)
+
+
+def test_empty_mesh_fails_unchanged(addon, bl):
+    me = bpy.data.meshes.new('empty')
+    obj = bpy.data.objects.new('empty', me)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    _fails_unchanged(bl, 'no faces')
+
+
+def test_genuine_needle_still_works(addon, bl):
+    V, polys = _grid()
+    V = np.vstack([V, 0.5 * (V[6] + V[7]) + [0, 1e-4, 0]])     # almost on the edge (6, 7)
+    # the two quads on the edge become pentagons through the new vertex: the triangulation has
+    # needle triangles of aspect ratio about 1e4 there
+    polys = [p for p in polys if p not in ([6, 7, 12, 11], [1, 2, 7, 6])] + [[6, 25, 7, 12, 11],
+                                                                           [1, 2, 7, 25, 6]]
+    obj = bl.mesh_object('needle', V, polys)
+    bpy.ops.uv.conformal_flatten(boundary='AREA')
+    buf = np.empty(2 * len(obj.data.loops), np.float32)
+    obj.data.uv_layers.active.uv.foreach_get('vector', buf)
+    assert np.isfinite(buf).all()
