@@ -14,6 +14,8 @@ COMMANDS = {
     'make-surface': ('cmd_surface', 'write one of the test surfaces (DESIGN.md section 7)'),
     'unwrap': ('cmd_unwrap', 'cut a mesh into islands along seams, flatten and pack them, write per-corner UVs'),
     'sphere': ('cmd_sphere', 'map a closed genus-0 mesh conformally to the unit sphere (OBJ out)'),
+    'reconstruct': ('cmd_reconstruct', 'recover a metric on a disk mesh from travel times (CSV)'),
+    'reconstruct-demo': ('cmd_reconstruct_demo', 'metric reconstruction experiment of the paper, section 8.2'),
 }
 
 
