@@ -57,7 +57,7 @@ def main():
                 print(f'| {name} | {mode} | error: {exc} ||||||| ')
                 continue
             dt = time.perf_counter() - t
-            isl = f"{r['flattened']}/{r['islands']}" + (f" ({r['failed']} skipped: not a disk)" if r['failed'] else '')
+            isl = f"{r['flattened']}/{r['islands']}" + (f" ({r['failed']} skipped)" if r['failed'] else '')
             print(f"| {name} | {mode} | {isl} | {r['holes_filled']}/{r['holes_cut']} | {r['flips']} | "
                   f"{r['overlaps']} | {r['qc_mean_worst']:.4f} | {r['mu_ratio_worst']:.4g} | {dt:.2f} |",
                   flush=True)
