@@ -458,8 +458,8 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='tru
             loops = topology.boundary_loops(Fi, hi - lo)
             ui, r = _flatten_island(Vi, Fi, loops, holes, boundary, desc, sub, options)
             rep.update(r)
-            if i in cut_info:
-                rep['holes'] = cut_info[i]
+            if i in cut_info:          # (a hole left uncut would have been filled: keep both)
+                rep['holes'] = {**rep.get('holes', {}), **cut_info[i]}
                 rep['loops_before_cut'] = rep['loops'] + cut_info[i]['cut']
         except ConformalError as exc:
             msg = str(exc)
