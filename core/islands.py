@@ -95,8 +95,9 @@ def seam_pairs(seams, n):
     return S
 
 
-def _seam_halfedges(F, n, seams):
-    """(3m,) bool: half-edges whose undirected edge is a seam. Raises if a seam is not an edge."""
+def _seam_halfedges(F, n, seams, strict=True):
+    """(3m,) bool: half-edges whose undirected edge is a seam. With ``strict``, raises if a seam is
+    not an edge of ``F``; otherwise such seams are ignored."""
     S = seam_pairs(seams, n)
     H = topology.halfedges(F)
     if len(S) == 0:
@@ -104,7 +105,7 @@ def _seam_halfedges(F, n, seams):
     hkey = np.minimum(H[:, 0], H[:, 1]) * n + np.maximum(H[:, 0], H[:, 1])
     skey = np.minimum(S[:, 0], S[:, 1]) * n + np.maximum(S[:, 0], S[:, 1])
     found = np.isin(skey, hkey)
-    if not found.all():
+    if strict and not found.all():
         bad = np.nonzero(~found)[0]
         ex = ', '.join(f"({a}, {b})" for a, b in S[bad[:3]].tolist())
         raise ConformalError(f"{len(bad)} seam(s) are not edges of the mesh, e.g. {ex}: a seam must join "
@@ -112,13 +113,15 @@ def _seam_halfedges(F, n, seams):
     return np.isin(hkey, skey)
 
 
-def cut_along_seams(F, n, seams=None):
+def cut_along_seams(F, n, seams=None, strict=True):
     """Cut the triangle mesh ``F`` (m,3) with ``n`` vertices along ``seams`` ((k,2) vertex pairs or
-    None). The mesh must be manifold and consistently oriented (``check_mesh``). Returns ``Cut``."""
+    None). The mesh must be manifold and consistently oriented (``check_mesh``). ``strict``: a seam
+    that is not an edge of ``F`` is an error (else ignored, e.g. seams outside a selection).
+    Returns ``Cut``."""
     F = np.asarray(F, np.int64)
     m = len(F)
     tw = topology.twin_halfedges(F, n)
-    join = (tw >= 0) & ~_seam_halfedges(F, n, seams)
+    join = (tw >= 0) & ~_seam_halfedges(F, n, seams, strict)
     h = np.nonzero(join)[0]
     ones = np.ones(len(h), np.int8)
     n_isl, face_island = connected_components(
@@ -381,7 +384,7 @@ def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
 
 def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='true', pack=True,
            margin=0.01, fit='unit_square', max_faces=DEFAULT_MAX_FACES, allow_loose=False, edges=None,
-           on_error='raise', tri_poly=None, progress=None, **options):
+           on_error='raise', tri_poly=None, strict_seams=True, progress=None, **options):
     """Cut a triangle mesh into islands along ``seams`` and flatten every island conformally.
 
     V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise. seams: (k,2) int vertex pairs
@@ -395,6 +398,8 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='tru
     (e,2) all edges of the mesh, checked for loose edges. on_error: 'raise' stops at the first island
     that cannot be flattened; 'skip' leaves its UVs at 0, marks it in ``ok`` and reports the error.
     tri_poly: optional (m,) polygon of each triangle, used to name polygons in messages.
+    strict_seams: a seam that is not an edge of ``F`` is an error; False ignores it (useful when ``F``
+    is a selection of a bigger mesh and ``seams`` are all of its seams).
     progress: optional callable ``progress(fraction, message)``. Extra ``options`` go to ``flatten``.
     Returns ``UnwrapResult``. Raises ``ConformalError`` for bad input."""
     for name, value, allowed in (('holes', holes, HOLE_MODES), ('island_scale', island_scale, ISLAND_SCALES),
@@ -419,7 +424,7 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='tru
                                  f"{tri_poly.shape}")
     report_progress(0.02, 'cutting along seams')
     seams = seam_pairs(seams, n)
-    cut = cut_along_seams(F, n, seams)
+    cut = cut_along_seams(F, n, seams, strict_seams)
     cut_info = {}
     if holes == 'cut':
         extra = []
@@ -435,7 +440,7 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='tru
                 cut_info[i] = {'mode': 'cut', 'cut': len(got), 'cut_edges': int(sum(len(p) for p in got))}
         if extra:
             seams = np.concatenate([seams] + extra)
-            cut = cut_along_seams(F, n, seams)     # the same islands, in the same order
+            cut = cut_along_seams(F, n, seams, strict_seams)     # the same islands, same order
     island_faces = cut.island_faces()
     n_isl = cut.n_islands
     areas = np.bincount(cut.face_island, face_areas(V, F), minlength=n_isl)

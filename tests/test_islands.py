@@ -83,6 +83,7 @@ def test_boundary_seams_change_nothing_and_bad_seams_raise():
     assert cut.n_islands == 1 and len(cut.vert_of) == len(V)
     with pytest.raises(ConformalError, match='not edges of the mesh'):
         cut_along_seams(F, len(V), [[0, 15]])
+    assert cut_along_seams(F, len(V), [[0, 15]], strict=False).n_islands == 1      # ignored
     with pytest.raises(ConformalError, match='do not exist'):
         cut_along_seams(F, len(V), [[0, 99]])
     with pytest.raises(ConformalError, match='to itself'):
@@ -293,3 +294,19 @@ def test_cli_unwrap_keeps_quads_and_reads_uv_seams(tmp_path, capsys):
     out2 = tmp_path / 'suz2.obj'
     assert main(['unwrap', str(out), str(out2), '--boundary', 'area', '--seams-from-uv', '--json']) == 0
     assert json.loads(capsys.readouterr().out)['summary']['islands'] == 3
+
+
+def test_selection_workflow_with_all_seams():
+    """A selection (a sub-mesh) unwrapped with every seam of the whole mesh: seams outside the
+    selection are ignored with strict_seams=False."""
+    V, F, S = uv_sphere(16, 32)
+    north = V[F].mean(1)[:, 2] > 0.3                    # a cap around the north pole
+    used = np.unique(F[north])
+    remap = np.full(len(V), -1)
+    remap[used] = np.arange(len(used))
+    Fs = remap[F[north]]
+    Ss = remap[S[(remap[S] >= 0).all(1)]]
+    with pytest.raises(ConformalError, match='not edges'):
+        unwrap(V[used], Fs, np.r_[Ss, [[0, len(used) - 1]]], boundary='area')
+    res = unwrap(V[used], Fs, np.r_[Ss, [[0, len(used) - 1]]], boundary='area', strict_seams=False)
+    assert res.report['islands'] == 1 and res.report['flips'] == 0 and res.report['overlaps'] == 0
