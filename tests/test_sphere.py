@@ -193,3 +193,56 @@ def test_cli(tmp_path):
                        capture_output=True, text=True, cwd=ROOT)
     assert p.returncode == 2 and p.stderr.count('\n') == 1 and 'closed' in p.stderr
     assert not out2.exists()
+
+
+# --- geodesic distances through the sphere ---------------------------------------------------------
+def _great_circle(V, s):
+    U = V / np.linalg.norm(V, axis=1)[:, None]
+    return np.arccos(np.clip(U @ U[s], -1, 1))
+
+
+def test_geodesic_icosphere_great_circles():
+    from core.sphere import sphere_geodesic
+    V, F = icosphere(10)
+    for s in (0, 500, int(np.argmin(V[:, 2]))):          # on the equator, anywhere, at a pole
+        d, rep = sphere_geodesic(V, F, [s], S=V)
+        gc = _great_circle(V, s)
+        m = gc > 0.05
+        err = np.abs(d[m] - gc[m]) / gc[m]
+        assert err.mean() < 0.003 and err.max() < 0.05, (s, err.mean(), err.max())
+        assert d[s] == 0 and rep['solver'] == 'skfmm' and rep['charts'] == 2
+    # two sources: the pointwise minimum
+    d2, _ = sphere_geodesic(V, F, [0, 700], S=V)
+    gc = np.minimum(_great_circle(V, 0), _great_circle(V, 700))
+    m = gc > 0.05
+    assert (np.abs(d2[m] - gc[m]) / gc[m]).mean() < 0.004
+
+
+def test_geodesic_through_the_computed_map_in_mesh_units():
+    from core.sphere import sphere_geodesic
+    V, F = icosphere(8)
+    W = 3.0 * V                                          # radius 3: distances scale, the map does not care
+    d, rep = sphere_geodesic(W, F, [17])                 # maps with moebius='uniform' itself
+    gc = 3.0 * _great_circle(V, 17)
+    m = gc > 0.15
+    assert (np.abs(d[m] - gc[m]) / gc[m]).mean() < 0.01
+    assert rep['sphere']['flips'] == 0
+
+
+def test_geodesic_numpy_sweep_fallback():
+    from core.sphere import sphere_geodesic
+    V, F = icosphere(5)
+    d, rep = sphere_geodesic(V, F, [3], S=V, grid=96, solver='sweep')
+    gc = _great_circle(V, 3)
+    m = gc > 0.1
+    assert rep['solver'] == 'sweep'
+    assert (np.abs(d[m] - gc[m]) / gc[m]).mean() < 0.02
+
+
+def test_geodesic_bad_sources():
+    from core.sphere import sphere_geodesic
+    V, F = icosphere(3)
+    with pytest.raises(ConformalError, match='source'):
+        sphere_geodesic(V, F, [len(V)], S=V)
+    with pytest.raises(ConformalError, match='source'):
+        sphere_geodesic(V, F, [], S=V)
