@@ -44,6 +44,7 @@ SEED_RADIUS = 5.5        # source seed disk radius, in grid cells (DESIGN.md sec
                          # not an integer, so grid nodes rarely sit exactly on the seed circle
 DEFAULT_CELLS = 96       # grid cells along the longer side of the UV bounding box
 DEFAULT_CONTROL = 8      # B-spline control values along the longer side
+SOLVERS = ('auto', 'skfmm', 'sweep')
 DEFAULT_NOISE = 0.005    # expected relative error of the times (sets the data term's weight)
 DEFAULT_SMOOTHNESS = 1.0  # weight of the Dirichlet term
 DEFAULT_CURVATURE = 10.0  # weight of the thin-plate term
@@ -221,16 +222,33 @@ def _sample_soft(grid, field, P, fallback):
         return np.where(tot > 1e-12, (wts * vals).sum(1) / tot, fallback)
 
 
-def march(grid, w, src):
+def _solver(solver):
+    if solver not in SOLVERS:
+        raise ConformalError(f"unknown eikonal solver {solver!r}: use one of {', '.join(SOLVERS)}")
+    if solver == 'sweep':
+        return 'sweep'
+    try:
+        import skfmm  # noqa: F401
+        return 'skfmm'
+    except ImportError:
+        if solver == 'skfmm':
+            raise ConformalError("scikit-fmm is not installed: use the 'sweep' solver") from None
+        return 'sweep'
+
+
+def march(grid, w, src, solver='auto'):
     """Travel times (ny,nx) from the UV point ``src`` (2,) through the weight field ``w`` (ny,nx)
     (``|grad T| = w``; only valid nodes are used; +inf elsewhere).
 
     Seed: within ``SEED_RADIUS + 2`` cells of the source the time is the straight-line chart time
-    ``|x - s| (w_s + 4 w_mid + w_x) / 6`` (Simpson's rule along the segment); the zero contour of
-    ``phi`` is the metric circle ``T = tau = SEED_RADIUS h w_s``, fast marching (scikit-fmm, order 2)
-    continues from it and ``tau`` is added back, so there is no point-source offset (scikit-fmm issue
-    #22). Also returns the bool (ny,nx) mask of seed nodes (inside the circle or next to it)."""
-    import skfmm
+    ``|x - s| (w_s + 4 w_mid + w_x) / 6`` (Simpson's rule along the segment); the seed is the metric
+    disk ``T < tau = SEED_RADIUS h w_s``. ``solver`` 'skfmm' marches (order 2) from its rim, with the
+    level set calibrated by ``core.geodesic.calibrate_phi`` so that scikit-fmm starts the nodes next
+    to the rim at their exact times (no point-source offset), and adds ``tau`` back; 'sweep' runs
+    ``core.eikonal`` (pure numpy) from the fixed seed times; 'auto' picks scikit-fmm if it imports.
+    Also returns the bool (ny,nx) mask of seed nodes (inside the disk or next to it)."""
+    from .geodesic import calibrate_phi, march as eikonal_march
+    solver = _solver(solver)
     x, y = grid.coords()
     h = grid.h
     r = SEED_RADIUS * h
@@ -238,26 +256,29 @@ def march(grid, w, src):
     idx, wts = grid.bilinear(src[None])
     w_src = float((w.ravel()[idx[0]] * wts[0]).sum())
     tau = r * w_src
-    phi = d - r
     win = (d < r + 2 * h) & grid.valid
     ii, jj = np.nonzero(win)
     P = np.stack([x[jj], y[ii]], 1)
     w_mid = _sample_soft(grid, w, 0.5 * (P + src), w_src)
     T_loc = d[ii, jj] * (w_src + 4 * w_mid + w[ii, jj]) / 6.0
-    phi[ii, jj] = (T_loc - tau) / w_src
-    phi[np.abs(phi) < 1e-6 * h] = 1e-6 * h     # no node exactly on the contour
-    neg = (phi < 0) & grid.valid
+    # distance to the rim as scikit-fmm sees it (its start time is distance times w)
+    D = d - r
+    D[ii, jj] = (T_loc - tau) / w[ii, jj]
+    neg = (D < 0) & grid.valid
     if not neg.any():
         raise ConformalError("a source seed covers no grid node: increase the grid size")
     speed = 1.0 / np.where(grid.valid, w, 1.0)
+    T_seed = np.full(grid.shape, np.inf)
+    T_seed[ii, jj] = T_loc
+    phi = calibrate_phi(D, grid.valid, h)
     try:
-        T = skfmm.travel_time(np.ma.MaskedArray(phi, ~grid.valid), speed, dx=h, order=2)
+        T, used = eikonal_march(T_seed, neg, phi, speed, ~grid.valid, h, solver)
     except ValueError as exc:
         raise ConformalError(f"fast marching failed from source at UV {tuple(np.round(src, 4))}: "
                              f"{exc}") from None
-    T = np.ma.filled(np.ma.MaskedArray(T), np.inf).astype(np.float64)
+    if used == 'skfmm':
+        T = T + tau
     T[~grid.valid] = np.inf
-    T = T + tau
     T[ii, jj] = np.where(neg[ii, jj], T_loc, T[ii, jj])
     seed = neg.copy()
     seed[:, :-1] |= neg[:, 1:]
@@ -350,8 +371,9 @@ class PlaneProblem:
     ``src_uv``, ``sns_uv`` (k,2) the UV points of each measurement's source and sensor; ``times``
     (k,) measured travel times. Sources with the same UV point share one fast marching."""
 
-    def __init__(self, grid, src_uv, sns_uv, times, control=DEFAULT_CONTROL):
+    def __init__(self, grid, src_uv, sns_uv, times, control=DEFAULT_CONTROL, solver='auto'):
         self.grid = grid
+        self.solver = _solver(solver)
         self.spline = SplineField(grid, control)
         self.times = np.asarray(times, np.float64)
         keys, inv = np.unique(np.round(np.asarray(src_uv, np.float64), 12), axis=0, return_inverse=True)
@@ -374,7 +396,7 @@ class PlaneProblem:
         pred = np.empty(len(self.times))
         fields = []
         for s, rows in zip(self.sources, self.groups):
-            T, seed = march(self.grid, w, s)
+            T, seed = march(self.grid, w, s, self.solver)
             vals = sample(T, self.idx[rows], self.wts[rows])
             if not np.all(np.isfinite(vals)):
                 raise ConformalError("a sensor is not reached by the fast marching from its source: "
@@ -509,7 +531,7 @@ def check_measurements(n, sources, sensors, times):
 
 def reconstruct(V, F, sources, sensors, times, boundary='uniform', cells=DEFAULT_CELLS,
                 control=DEFAULT_CONTROL, noise=DEFAULT_NOISE, smoothness=DEFAULT_SMOOTHNESS,
-                curvature=DEFAULT_CURVATURE, max_iter=60, flat=None, progress=None):
+                curvature=DEFAULT_CURVATURE, max_iter=60, solver='auto', flat=None, progress=None):
     """Recover an isotropic metric on a disk mesh from travel times.
 
     ``V`` (n,3), ``F`` (m,3) a disk-topology triangle mesh; ``sources``, ``sensors`` (k,) vertex
@@ -519,7 +541,8 @@ def reconstruct(V, F, sources, sensors, times, boundary='uniform', cells=DEFAULT
     ``control``: B-spline control values along it. ``noise``: expected relative error of the times
     (the data term is ``sum ((T - d) / (noise * mean d))^2``); ``smoothness``, ``curvature``: weights
     of the Dirichlet and thin-plate terms of ``log xi`` (see the module docstring); raise ``noise``
-    for noisy measurements. Returns ``MetricResult`` with ``xi`` (n,)."""
+    for noisy measurements. ``solver``: eikonal solver, 'auto', 'skfmm' or 'sweep' (pure numpy).
+    Returns ``MetricResult`` with ``xi`` (n,)."""
     from .flatten import flatten
     t0 = time.perf_counter()
     report_progress = progress or (lambda f, msg: None)
@@ -544,7 +567,7 @@ def reconstruct(V, F, sources, sensors, times, boundary='uniform', cells=DEFAULT
     mu_v = vertex_mu(V, F, uv)
     report_progress(0.05, 'building the grid')
     grid = make_grid(uv, F, mu_v, cells)
-    problem = PlaneProblem(grid, uv[src], uv[sns], t, control=control)
+    problem = PlaneProblem(grid, uv[src], uv[sns], t, control=control, solver=solver)
     c, rep = solve_plane(problem, noise=noise, smoothness=smoothness, curvature=curvature,
                          max_iter=max_iter,
                          progress=lambda f, msg: report_progress(0.05 + 0.9 * f, msg))
@@ -552,7 +575,8 @@ def reconstruct(V, F, sources, sensors, times, boundary='uniform', cells=DEFAULT
     report = {'boundary': flat_mode, 'vertices': len(V), 'faces': len(F), 'measurements': len(t),
               'sources': int(len(np.unique(src))), 'sensors': int(len(np.unique(sns))),
               'grid': list(grid.shape), 'control': [problem.spline.Ky, problem.spline.Kx],
-              'noise': noise, 'smoothness': smoothness, 'curvature': curvature,
+              'solver': problem.solver, 'noise': noise, 'smoothness': smoothness,
+              'curvature': curvature,
               'mu_ratio': float(mu_v.min() / mu_v.max())}
     report.update(rep)
     report['seconds'] = {'flatten': round(t_flat, 3), 'fit': rep['seconds'],
