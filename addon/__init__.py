@@ -8,6 +8,7 @@ MODULES = (
     'prefs',
     'ops_flatten',
     'ui',
+    'ops_sphere',
     'ops_metric',
 )
 

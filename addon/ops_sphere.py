@@ -1,0 +1,313 @@
+"""``bpy.ops.uv.conformal_sphere``: map a closed genus-0 mesh conformally to the sphere (core.sphere),
+with the Moebius transformation chosen for the most uniform conformal factor.
+
+Writes, once everything is computed (a failure leaves the mesh untouched):
+
+- shape key "Sphere" (a "Basis" key is added first if the mesh has none): the sphere with the mesh's
+  surface area (radius sqrt(A / 4 pi)), centred at the mesh's area centroid, so the key's value slides
+  between mesh and sphere;
+- FLOAT_VECTOR point attribute ``sphere_position``: the unit-sphere position of each vertex;
+- with ``bake``: mu per vertex as ``conformal_factor`` and ``conformal_factor_color`` (as the flatten
+  operator does);
+- spherical UVs (longitude, latitude) per corner into the active UV map, split along the seam at
+  longitude 180 degrees: a polygon that crosses the seam gets continuous UVs past u = 1; a corner at a
+  pole takes the mean u of its polygon's other corners; the sphere is rotated (which leaves mu
+  unchanged) so that the north pole sits on a vertex, and a polygon that encloses the south pole gets
+  its corners' longitudes unwrapped around it.
+
+Synchronous ``execute``, like the flatten operator (headless scripts and tests run the same path)."""
+import time
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, EnumProperty, PointerProperty
+
+from ..core.errors import ConformalError
+from ..core.geometry import face_areas
+from ..core.sphere import sphere_map
+from . import meshio
+from .prefs import get_prefs
+
+REPORT_KEY = 'conformal_sphere_report'
+SHAPE_KEY = 'Sphere'
+POSITION_ATTR = 'sphere_position'
+MU_ATTR = 'conformal_factor'
+
+MOEBIUS_ITEMS = [
+    ('UNIFORM', "Uniform", "Most uniform conformal factor: maximise min mu / max mu over the Moebius group"),
+    ('CENTER', "Center", "Area-centroid centring (Baden, Crane and Kazhdan 2018)"),
+    ('AREA', "Area", "Least mean |log area ratio| (Choi)"),
+    ('NONE', "None", "The map as computed, no Moebius normalisation"),
+]
+
+
+# --- pure computations (no bpy data written) -----------------------------------------------------
+def pole_rotation(S, k):
+    """Rotation matrix (3,3) taking the unit vector ``S[k]`` to the north pole (0,0,1)."""
+    a = S[k] / np.linalg.norm(S[k])
+    z = np.array([0.0, 0.0, 1.0])
+    v = np.cross(a, z)
+    s, c = np.linalg.norm(v), float(a @ z)
+    if s < 1e-15:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]]) / s
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+def spherical_uv(S, corner_verts, sizes):
+    """Per-corner UVs (c,2) of unit-sphere positions ``S`` (n,3): u = longitude / 2 pi + 0.5,
+    v = latitude / pi + 0.5, split along the seam at u = 0/1 (see the module docstring). Returns
+    (uv, pole_polygons) with the number of polygons that enclose a pole."""
+    x, y, z = S[:, 0], S[:, 1], S[:, 2]
+    lon = np.arctan2(y, x)
+    lat = np.arctan2(z, np.hypot(x, y))
+    at_pole = np.hypot(x, y) < 1e-9
+    u = lon[corner_verts] / (2 * np.pi) + 0.5
+    v = lat[corner_verts] / np.pi + 0.5
+    p = len(sizes)
+    poly = np.repeat(np.arange(p), sizes)
+    start = np.r_[0, np.cumsum(sizes)[:-1]]
+    pole_c = at_pole[corner_verts]
+    # winding of each polygon around the pole axis: sum of wrapped longitude steps (pole corners skipped)
+    nxt = np.arange(len(corner_verts)) + 1
+    nxt[np.cumsum(sizes) - 1] = start
+    d = u[nxt] - u
+    d = np.where(pole_c | pole_c[nxt], 0.0, d - np.round(d))
+    wind = np.bincount(poly, d, minlength=p)
+    encl = np.abs(wind) > 0.5
+    # ordinary polygons: bring every corner within half a turn of the polygon's first non-pole corner
+    ref_c = np.where(pole_c, np.inf, np.arange(len(u)))
+    first = np.minimum.reduceat(ref_c, start)
+    ref = np.where(np.isfinite(first), u[np.where(np.isfinite(first), first, 0).astype(np.int64)], 0.5)
+    u = u - np.round(u - ref[poly])
+    # polygons enclosing a pole: unwrap the longitude continuously around the polygon
+    for q in np.nonzero(encl)[0].tolist():
+        s, k = start[q], sizes[q]
+        steps = d[s:s + k - 1]
+        uu = u[s] + np.r_[0.0, np.cumsum(steps)]
+        u[s:s + k] = uu - np.floor(uu.mean())
+    # shift polygons so that their mean u lies in [0, 1)
+    cnt = np.bincount(poly, ~pole_c, minlength=p)
+    mean = np.bincount(poly, np.where(pole_c, 0.0, u), minlength=p) / np.maximum(cnt, 1)
+    u = u - np.floor(mean)[poly]
+    # corners on a pole: the mean u of the polygon's other corners
+    mean = np.bincount(poly, np.where(pole_c, 0.0, u), minlength=p) / np.maximum(cnt, 1)
+    u = np.where(pole_c, mean[poly], u)
+    return np.stack([u, v], 1), int(encl.sum())
+
+
+def compute_sphere(md, moebius='UNIFORM', progress=None):
+    """Map ``md`` (``meshio.MeshArrays`` with triangles) to the sphere. Returns a dict of everything
+    to write: ``unit`` (n,3) rotated unit-sphere positions, ``key`` (n,3) shape key positions,
+    ``loop_uv`` (c,2), ``mu_vertex`` (n,), ``result`` (the core's ``SphereResult``), ``pole_polygons``.
+    Raises ``ConformalError``."""
+    F = md.F
+    res = sphere_map(md.V, F, moebius=moebius.lower(), progress=progress)
+    S = res.S / np.linalg.norm(res.S, axis=1)[:, None]
+    R = pole_rotation(S, int(np.argmax(S[:, 2])))
+    unit = S @ R.T
+    A = face_areas(md.V, F)
+    centre = (md.V[F].mean(1) * A[:, None]).sum(0) / A.sum()
+    radius = np.sqrt(A.sum() / (4 * np.pi))
+    loop_uv, pole_polygons = spherical_uv(unit, md.corner_verts, md.sizes)
+    mu_vertex = meshio.face_to_vertex(F, res.mu, A, md.n_vertices, power=2.0)
+    out = dict(unit=unit, key=centre + radius * unit, loop_uv=loop_uv, mu_vertex=mu_vertex, result=res,
+               pole_polygons=pole_polygons, radius=float(radius), centre=centre.tolist())
+    for k in ('unit', 'key', 'loop_uv'):
+        if not np.isfinite(out[k]).all():
+            raise ConformalError("the sphere map produced non-finite positions: the mesh is too "
+                                 "degenerate; clean it up (merge by distance, dissolve degenerate faces)")
+    return out
+
+
+# --- writing ---------------------------------------------------------------------------------------
+def write_shape_key(obj, name, positions):
+    """Set shape key ``name`` of ``obj`` to ``positions`` (n,3), adding "Basis" first if the mesh has
+    no shape keys. Returns the key block."""
+    if obj.data.shape_keys is None:
+        obj.shape_key_add(name='Basis', from_mix=False)
+    kb = obj.data.shape_keys.key_blocks.get(name)
+    if kb is None:
+        kb = obj.shape_key_add(name=name, from_mix=False)
+    kb.data.foreach_set('co', np.ascontiguousarray(positions, np.float32).ravel())
+    obj.data.update()
+    return kb
+
+
+def sphere_object(context, obj, moebius='UNIFORM', bake=True, colormap=None):
+    """Map mesh object ``obj`` (None: the active object) to the sphere and write the results (module
+    docstring). Returns the report dict (also stored as JSON in ``obj.data[REPORT_KEY]``). Raises
+    ``ConformalError`` with nothing written."""
+    t0 = time.perf_counter()
+    obj = meshio.mesh_object(context, obj)
+    me = obj.data
+    colormap = colormap or get_prefs(context).colormap
+    with meshio.object_mode(obj), meshio.Progress(context) as progress:
+        md = meshio.read_mesh(obj)
+        progress(0.02, 'read mesh')
+        t = time.perf_counter()
+        out = compute_sphere(md, moebius, progress=lambda f, msg: progress(0.02 + 0.9 * f, msg))
+        t_map = time.perf_counter() - t
+        # everything is computed: from here on, only writes
+        t = time.perf_counter()
+        write_shape_key(obj, SHAPE_KEY, out['key'])
+        meshio.write_point_vector(me, POSITION_ATTR, out['unit'])
+        uv_name = meshio.write_uv(me, out['loop_uv'])
+        rng = None
+        if bake:
+            rng = meshio.bake_scalar(me, MU_ATTR, out['mu_vertex'], colormap_name=colormap, log=True)
+        t_write = time.perf_counter() - t
+        progress(1.0, 'done')
+        core = out['result'].report
+        report = {
+            'object': obj.name, 'mesh': me.name, 'moebius': moebius, 'uv_map': uv_name,
+            'shape_key': SHAPE_KEY, 'vertices': md.n_vertices, 'polygons': int(len(md.sizes)),
+            'triangles': int(len(md.tri_corners)),
+            'mu_ratio': core.get('mu_ratio'), 'mu_ratio_p1_p99': core.get('mu_ratio_p1_p99'),
+            'baselines': core.get('baselines'), 'qc_mean': core.get('qc_mean'),
+            'qc_max': core.get('qc_max'), 'flips': core.get('flips'),
+            'flipped_faces': core.get('flipped_faces', [])[:100],
+            'pole_polygons': out['pole_polygons'], 'radius': out['radius'], 'centre': out['centre'],
+            'baked': bool(bake), 'conformal_factor_range': list(rng) if rng else None,
+            'seconds': {'map': round(t_map, 4), 'write': round(t_write, 4),
+                        'total': round(time.perf_counter() - t0, 4)},
+            'core_seconds': core.get('seconds'),
+        }
+        meshio.store_report(me, REPORT_KEY, report)
+    return report
+
+
+def summary_line(r):
+    parts = [f"Conformal sphere {r['object']!r} ({r['moebius'].lower()}): {r['triangles']} triangles",
+             f"mu ratio {r['mu_ratio']:.4g}"]
+    if r.get('baselines'):
+        parts.append("baselines " + ", ".join(f"{k} {v:.3g}" for k, v in r['baselines'].items()))
+    parts += [f"{r['flips']} flips", f"qc mean {r['qc_mean']:.4f}", f"{r['seconds']['total']:.2f} s"]
+    return ', '.join(parts)
+
+
+class UV_OT_conformal_sphere(bpy.types.Operator):
+    """Map the active closed mesh conformally to the sphere, with the most uniform scale; add a
+    "Sphere" shape key, write spherical UVs and bake mu"""
+    bl_idname = 'uv.conformal_sphere'
+    bl_label = "Conformal Sphere"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    moebius: EnumProperty(name="Moebius", items=MOEBIUS_ITEMS, default='UNIFORM',
+                          description="How the Moebius transformation of the sphere is chosen")
+    bake: BoolProperty(name="Bake Conformal Factor", default=True,
+                       description="Write mu as the point attribute 'conformal_factor' and the colour "
+                                   "attribute 'conformal_factor_color'")
+
+    @classmethod
+    def poll(cls, context):
+        return True          # a wrong selection gets an ERROR report that says what to do
+
+    def execute(self, context):
+        try:
+            report = sphere_object(context, None, self.moebius, self.bake)
+        except ConformalError as exc:
+            self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        self.report({'INFO'}, summary_line(report))
+        return {'FINISHED'}
+
+
+# --- panel -----------------------------------------------------------------------------------------
+_closed_cache = {}
+
+
+def is_closed_mesh(obj):
+    """True if ``obj`` is a mesh whose every edge has exactly two faces (cached per mesh and element
+    counts; in Edit mode the last Object-mode answer is used, or True if there is none)."""
+    if obj is None or obj.type != 'MESH':
+        return False
+    me = obj.data
+    key = (me.as_pointer(), len(me.vertices), len(me.edges), len(me.loops))
+    if key in _closed_cache:
+        return _closed_cache[key]
+    if obj.mode == 'EDIT':
+        return True
+    if len(me.polygons) == 0 or len(me.edges) == 0:
+        ans = False
+    else:
+        ce = np.empty(len(me.loops), np.int32)
+        me.attributes['.corner_edge'].data.foreach_get('value', ce)
+        ans = bool((np.bincount(ce, minlength=len(me.edges)) == 2).all())
+    if len(_closed_cache) > 64:
+        _closed_cache.clear()
+    _closed_cache[key] = ans
+    return ans
+
+
+class ConformalSphereSettings(bpy.types.PropertyGroup):
+    moebius: EnumProperty(name="Moebius", items=MOEBIUS_ITEMS, default='UNIFORM')
+    bake: BoolProperty(name="Bake Conformal Factor", default=True)
+
+
+SPHERE_ROWS = [
+    ("Mu ratio", 'mu_ratio'),
+    ("Best baseline", lambda r: "-" if not r.get('baselines') else
+        "{1:.4g} ({0})".format(*max(r['baselines'].items(), key=lambda kv: kv[1]))),
+    ("Flips", 'flips'),
+    ("Qc mean", lambda r: "-" if r.get('qc_mean') is None else f"{r['qc_mean']:.4f}"),
+    ("Time", lambda r: f"{r['seconds']['total']:.2f} s" if r.get('seconds') else "-"),
+]
+
+
+class _SpherePanel:
+    bl_region_type = 'UI'
+    bl_label = "Conformal Sphere"
+
+    @classmethod
+    def poll(cls, context):
+        return is_closed_mesh(context.active_object)
+
+    def draw(self, context):
+        from .ui import draw_report
+        layout = self.layout
+        settings = context.scene.conformal_sphere
+        col = layout.column()
+        col.prop(settings, 'moebius')
+        col.prop(settings, 'bake')
+        op = col.operator(UV_OT_conformal_sphere.bl_idname, icon='SPHERE')
+        op.moebius, op.bake = settings.moebius, settings.bake
+        report = meshio.load_report(context.active_object.data, REPORT_KEY)
+        if report is not None:
+            box = layout.box()
+            box.label(text=f"Last: {report.get('moebius', '?').title()}, "
+                           f"{report.get('triangles', 0):,} triangles")
+            draw_report(box, report, SPHERE_ROWS)
+
+
+def _panel_classes():
+    from .ui import PARENT_IDS, CATEGORY
+    out = []
+    for space, parent in PARENT_IDS.items():
+        prefix = 'VIEW3D' if space == 'VIEW_3D' else 'IMAGE'
+        cls = type(f'{prefix}_PT_conformal_sphere', (_SpherePanel, bpy.types.Panel), {
+            'bl_idname': f'{prefix}_PT_conformal_sphere', 'bl_space_type': space,
+            'bl_category': CATEGORY, 'bl_parent_id': parent})
+        out.append(cls)
+    return out
+
+
+_registered = []
+
+
+def register():
+    bpy.utils.register_class(ConformalSphereSettings)
+    bpy.types.Scene.conformal_sphere = PointerProperty(type=ConformalSphereSettings)
+    bpy.utils.register_class(UV_OT_conformal_sphere)
+    for cls in _panel_classes():
+        bpy.utils.register_class(cls)
+        _registered.append(cls)
+
+
+def unregister():
+    for cls in reversed(_registered):
+        bpy.utils.unregister_class(cls)
+    _registered.clear()
+    bpy.utils.unregister_class(UV_OT_conformal_sphere)
+    del bpy.types.Scene.conformal_sphere
+    bpy.utils.unregister_class(ConformalSphereSettings)

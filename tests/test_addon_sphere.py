@@ -1,0 +1,151 @@
+"""Sphere mode in Blender (issue 5): ``bpy.ops.uv.conformal_sphere`` writes the "Sphere" shape key,
+the ``sphere_position`` attribute, the baked conformal factor and spherical UVs; an open mesh is
+refused with every data array untouched; the sub-panel is offered for closed meshes only."""
+import bpy
+import numpy as np
+import pytest
+
+
+def closed_object(bl, freq=6, name='blob'):
+    from conformal_flatten.core.sphere import blob
+    V, F = blob(freq, bumps=((0, 0, 1, 1.0), (1, 0, 0, 0.6)), width=0.15)
+    V = V.astype(np.float32).astype(float)
+    return bl.mesh_object(name, V, F), V, F
+
+
+def attr(me, name, field, width):
+    a = me.attributes[name]
+    buf = np.empty(len(a.data) * width, np.float32)
+    a.data.foreach_get(field, buf)
+    return buf.reshape(-1, width) if width > 1 else buf
+
+
+def corner_verts(me):
+    buf = np.empty(len(me.loops), np.int32)
+    me.attributes['.corner_vert'].data.foreach_get('value', buf)
+    return buf.astype(np.int64)
+
+
+def loop_uv(me):
+    buf = np.empty(len(me.loops) * 2, np.float32)
+    me.uv_layers.active.uv.foreach_get('vector', buf)
+    return buf.reshape(-1, 2).astype(float)
+
+
+def test_registered_with_flags(addon):
+    assert bpy.types.UV_OT_conformal_sphere.bl_options == {'REGISTER', 'UNDO'}
+    props = bpy.ops.uv.conformal_sphere.get_rna_type().properties
+    assert {i.identifier for i in props['moebius'].enum_items} == {'UNIFORM', 'CENTER', 'AREA', 'NONE'}
+    assert props['moebius'].default == 'UNIFORM' and props['bake'].default is True
+    assert hasattr(bpy.types, 'VIEW3D_PT_conformal_sphere') and hasattr(bpy.types.Scene, 'conformal_sphere')
+
+
+def test_sphere_operator_writes_everything(addon, bl):
+    from conformal_flatten.core.sphere import sphere_map
+    from conformal_flatten.core.geometry import face_areas
+    obj, V, F = closed_object(bl)
+    me = obj.data
+    assert bpy.ops.uv.conformal_sphere(moebius='UNIFORM', bake=True) == {'FINISHED'}
+    rep = addon.addon.meshio.load_report(me, 'conformal_sphere_report')
+    ref = sphere_map(V, F, moebius='uniform').report
+    assert rep['flips'] == 0 and rep['mu_ratio'] == pytest.approx(ref['mu_ratio'], rel=1e-9)
+    assert rep['mu_ratio'] >= max(rep['baselines'].values())
+    # shape keys: Basis (the mesh) and Sphere (area-preserving radius, centred)
+    keys = me.shape_keys.key_blocks
+    assert [k.name for k in keys] == ['Basis', 'Sphere']
+    basis = np.empty(len(V) * 3, np.float32)
+    keys['Basis'].data.foreach_get('co', basis)
+    np.testing.assert_allclose(basis.reshape(-1, 3), V, atol=1e-6)
+    sph = np.empty(len(V) * 3, np.float32)
+    keys['Sphere'].data.foreach_get('co', sph)
+    sph = sph.reshape(-1, 3)
+    A = face_areas(V, F)
+    r = np.linalg.norm(sph - np.array(rep['centre']), axis=1)
+    np.testing.assert_allclose(r, np.sqrt(A.sum() / (4 * np.pi)), rtol=1e-5)
+    # sphere_position: unit vectors along the key's directions
+    a = me.attributes['sphere_position']
+    assert (a.domain, a.data_type) == ('POINT', 'FLOAT_VECTOR')
+    P = attr(me, 'sphere_position', 'vector', 3)
+    np.testing.assert_allclose(np.linalg.norm(P, axis=1), 1, atol=1e-6)
+    np.testing.assert_allclose(P, (sph - np.array(rep['centre'])) / r[:, None], atol=1e-5)
+    # the positions are the core's map up to a rotation: the same per-triangle scale
+    Pn = P.astype(float)
+    a_s = 0.5 * np.linalg.norm(np.cross(Pn[F[:, 1]] - Pn[F[:, 0]], Pn[F[:, 2]] - Pn[F[:, 0]]), axis=1)
+    mu = np.sqrt(a_s / A)
+    assert mu.min() / mu.max() == pytest.approx(rep['mu_ratio'], rel=1e-3)
+    # baked mu
+    assert me.attributes['conformal_factor'].domain == 'POINT'
+    assert me.color_attributes.active_color_name == 'conformal_factor_color'
+    # spherical UVs: v is the latitude, each polygon is contiguous in u (split along the seam)
+    W = loop_uv(me)
+    cv = corner_verts(me)
+    lat = np.arcsin(np.clip(P[cv, 2], -1, 1))
+    np.testing.assert_allclose(W[:, 1], lat / np.pi + 0.5, atol=1e-5)
+    spread = np.ptp(W[:, 0].reshape(-1, 3), axis=1)
+    assert (spread < 0.25).sum() >= len(F) - rep['pole_polygons'] - 6   # only faces at the poles are wide
+    assert rep['pole_polygons'] <= 1
+    crossing = (np.ptp(np.arctan2(P[F, 1], P[F, 0]), axis=1) > np.pi)
+    assert crossing.any() and (spread[crossing] < 0.25).mean() > 0.9    # seam faces fixed
+    assert W[:, 0].min() > -0.5 and W[:, 0].max() < 1.5
+
+
+def test_existing_shape_keys_and_rerun(addon, bl):
+    obj, V, F = closed_object(bl, freq=4)
+    obj.shape_key_add(name='Basis', from_mix=False)
+    obj.shape_key_add(name='Other', from_mix=False)
+    assert bpy.ops.uv.conformal_sphere(moebius='CENTER', bake=False) == {'FINISHED'}
+    assert bpy.ops.uv.conformal_sphere(moebius='NONE', bake=False) == {'FINISHED'}
+    names = [k.name for k in obj.data.shape_keys.key_blocks]
+    assert names == ['Basis', 'Other', 'Sphere']
+    assert 'conformal_factor' not in obj.data.attributes
+
+
+def test_open_mesh_error_leaves_data(addon, bl):
+    obj, V, F = closed_object(bl, freq=4)
+    me = obj.data
+    # remove one triangle: an open mesh
+    obj2 = bl.mesh_object('open', V, F[1:])
+    before = bl.mesh_snapshot(obj2.data)
+    with pytest.raises(RuntimeError, match='open'):
+        bpy.ops.uv.conformal_sphere()
+    bl.assert_same(before, bl.mesh_snapshot(obj2.data))
+    assert obj2.data.shape_keys is None
+    # the closed one is offered the panel, the open one is not
+    from conformal_flatten.addon.ops_sphere import is_closed_mesh
+    assert is_closed_mesh(obj) and not is_closed_mesh(obj2)
+    assert not bpy.types.VIEW3D_PT_conformal_sphere.poll(bpy.context)     # active: the open mesh
+    bpy.context.view_layer.objects.active = obj
+    assert bpy.types.VIEW3D_PT_conformal_sphere.poll(bpy.context)
+
+
+def test_torus_error(addon, bl):
+    n, k = 16, 8
+    i, j = np.meshgrid(np.arange(n), np.arange(k), indexing='ij')
+    u, v = 2 * np.pi * i.ravel() / n, 2 * np.pi * j.ravel() / k
+    V = np.stack([(1 + 0.3 * np.cos(v)) * np.cos(u), (1 + 0.3 * np.cos(v)) * np.sin(u), 0.3 * np.sin(v)], 1)
+    quads = np.stack([(i * k + j).ravel(), (((i + 1) % n) * k + j).ravel(),
+                      (((i + 1) % n) * k + (j + 1) % k).ravel(), (i * k + (j + 1) % k).ravel()], 1)
+    obj = bl.mesh_object('torus', V, quads)
+    before = bl.mesh_snapshot(obj.data)
+    with pytest.raises(RuntimeError, match='genus 1'):
+        bpy.ops.uv.conformal_sphere()
+    bl.assert_same(before, bl.mesh_snapshot(obj.data))
+
+
+def test_spherical_uv_seam_and_poles():
+    from conformal_flatten.addon.ops_sphere import spherical_uv, pole_rotation
+    from conformal_flatten.core.sphere import icosphere
+    V, F = icosphere(4)
+    R = pole_rotation(V, 7)
+    S = V @ R.T
+    assert np.allclose(S[7], [0, 0, 1])
+    cv = F.ravel()
+    uv, encl = spherical_uv(S, cv, np.full(len(F), 3))
+    U = uv[:, 0].reshape(-1, 3)
+    assert encl <= 1
+    wide = np.ptp(U, axis=1) > 0.3
+    assert wide.sum() <= encl
+    # corners at the north pole take their polygon's mean u
+    pole = (F == 7)
+    others = U[pole.any(1)][~pole[pole.any(1)]].reshape(-1, 2).mean(1)
+    np.testing.assert_allclose(U[pole], others, atol=1e-12)
