@@ -25,7 +25,7 @@ from .geometry import angle_sums, face_areas
 from .laplacian import cotan_laplacian, face_gradients, gradient, divergence
 from .measures import uv_measures, conformal_factor, local_frames, jacobians_from_frames
 from .solve import Factor
-from .validate import check_mesh, DEFAULT_MAX_FACES
+from .validate import check_mesh, normalise_scale, DEFAULT_MAX_FACES
 
 BOUNDARY_MODES = ('free', 'area', 'uniform')
 FIT_MODES = ('true_scale', 'unit_square')
@@ -35,7 +35,8 @@ AUTO_BOUND_FACES = 60_000      # above this the certified bound is computed only
 @dataclass
 class FlattenResult:
     """``uv`` (n,2) float64 UV per vertex (counter-clockwise like the faces); ``mu`` (m,) realised
-    conformal factor per triangle (total UV area normalised to the 3D area); ``u`` (n,) log scale
+    conformal factor per triangle (total UV area normalised to the 3D area; NaN on triangles outside
+    ``real_faces``); ``u`` (n,) log scale
     factor per vertex from the Yamabe solve (None for ``free``); ``report`` dict of measures, bound
     and timings (seconds)."""
     uv: np.ndarray
@@ -181,13 +182,16 @@ def normalise_uv(V, F, uv, fit='true_scale'):
 
 
 def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FACES, bound=None,
-            progress=None, **options):
+            progress=None, real_faces=None, **options):
     """Flatten a disk-topology triangle mesh conformally.
 
     V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise. boundary: 'free', 'area' or
     'uniform'. fit: 'true_scale' (UV area = 3D area, mesh units) or 'unit_square'. bound: compute
-    the vertex-level L-inf certificate (default: for 'uniform'). progress: optional callable
-    ``progress(fraction, message)``. Extra ``options`` go to ``core.uniform.optimise``.
+    the vertex-level L-inf certificate (default: for 'uniform' up to AUTO_BOUND_FACES triangles; if its
+    linear program fails the report says so and the map is still returned). progress: optional
+    callable ``progress(fraction, message)``. real_faces: optional (m,) bool; only these triangles
+    count in the objective and the measures (the others are temporary fill, e.g. of holes).
+    Extra ``options`` go to ``core.uniform.optimise``.
     Returns ``FlattenResult``. Raises ``ConformalError`` on bad input."""
     if boundary not in BOUNDARY_MODES:
         raise ConformalError(f"unknown boundary mode {boundary!r}: use one of {', '.join(BOUNDARY_MODES)}")
@@ -197,13 +201,18 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     timings = {}
     t0 = time.perf_counter()
     info = check_mesh(V, F, kind='disk', max_faces=max_faces)
-    V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64)
+    # work in units where the mesh spans [-1,1]: the same numbers at any scale (1e-100 or 1e100)
+    V, unit = normalise_scale(np.asarray(V, np.float64))
+    mask = None if real_faces is None else np.asarray(real_faces, bool)
+    if mask is not None and (mask.shape != (len(F),) or not mask.any()):
+        raise ConformalError("real_faces must be one boolean per triangle, with at least one True")
     timings['check'] = time.perf_counter() - t0
     report_progress(0.05, 'factorising the Laplacian')
     t = time.perf_counter()
     system = DiskSystem(V, F, info.boundary)
     timings['factor'] = time.perf_counter() - t
+    report_progress(0.25, 'solving')
     report = {'boundary': boundary, 'vertices': len(V), 'faces': len(F),
               'boundary_vertices': int(len(info.boundary))}
     u = None
@@ -216,21 +225,32 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
         uv = system.map_from_u(u)
     else:
         from .uniform import optimise
-        u, uv, opt = optimise(system, progress=report_progress, **options)
+        u, uv, opt = optimise(system, progress=report_progress, real_faces=mask, **options)
         report.update(opt)
     timings['solve'] = time.perf_counter() - t
     if bound is None:
         bound = boundary == 'uniform' and len(F) <= AUTO_BOUND_FACES
     if bound:
         from .uniform import vertex_bound
+        report_progress(0.9, 'certifying the bound')
         t = time.perf_counter()
-        report['bound_vertex'] = vertex_bound(system)
+        try:
+            report['bound_vertex'] = vertex_bound(system, real_faces=mask)
+        except ConformalError as exc:
+            report['bound_vertex'] = None
+            report['bound_note'] = str(exc)
         timings['bound'] = time.perf_counter() - t
     report_progress(0.95, 'measuring')
-    uv = normalise_uv(V, F, uv, fit)
-    report.update(uv_measures(V, F, uv))
+    Fm = F if mask is None else F[mask]
+    uv = normalise_uv(V, Fm, uv, fit)
+    report.update(uv_measures(V, Fm, uv))
     if u is not None:
-        report['vertex_ratio'] = float(np.exp(u.min() - u.max()))
+        used = np.unique(Fm)
+        report['vertex_ratio'] = float(np.exp(u[used].min() - u[used].max()))
+    mu = np.full(len(F), np.nan)
+    mu[np.arange(len(F)) if mask is None else mask] = conformal_factor(V, Fm, uv)
+    if fit == 'true_scale':
+        uv = uv * unit
     timings['total'] = time.perf_counter() - t0
     report['seconds'] = {k: round(v, 4) for k, v in timings.items()}
-    return FlattenResult(uv=uv, mu=conformal_factor(V, F, uv), u=u, report=report)
+    return FlattenResult(uv=uv, mu=mu, u=u, report=report)

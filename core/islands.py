@@ -365,7 +365,10 @@ def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
         rep['holes'] = {'mode': 'fill', 'filled': len(info), 'fill_vertices': sum(h['fill_vertices'] for h in info),
                         'fill_faces': sum(h['fill_faces'] for h in info),
                         'hole_loop_vertices': [h['loop_vertices'] for h in info]}
-    res = flatten(Vf, Ff, boundary=boundary, fit='true_scale', max_faces=None, progress=progress, **options)
+    real = np.zeros(len(Ff), bool)
+    real[:m] = True                  # fill triangles come after the island's own (fill_holes)
+    res = flatten(Vf, Ff, boundary=boundary, fit='true_scale', max_faces=None, progress=progress,
+                  real_faces=real if len(Ff) > m else None, **options)
     uv = res.uv[:n]
     W = uv[F]
     e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
@@ -376,8 +379,7 @@ def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
     uv = (uv - uv.mean(0)) * np.sqrt(face_areas(V, F).sum() / a_uv)
     rep.update(uv_measures(V, F, uv))
     rep['overlaps'] = boundary_crossings(uv, loops)
-    if len(loops) == 1:          # with a fill these describe the filled mesh, not the island
-        rep.update({k: res.report[k] for k in ('bound_vertex', 'vertex_ratio') if k in res.report})
+    rep.update({k: res.report[k] for k in ('bound_vertex', 'vertex_ratio') if k in res.report})
     rep['seconds'] = res.report.get('seconds', {}).get('total')
     return uv, rep
 

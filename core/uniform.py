@@ -24,21 +24,23 @@ from .errors import ConformalError
 from .measures import singular_values
 
 
-def _qc_mean(system, uv):
-    J = system.jacobians(uv)
-    A = system.A
+def _qc_mean(system, uv, keep=slice(None)):
+    """Area-weighted mean of s1/s2 over the triangles ``keep``."""
+    J = system.jacobians(uv)[keep]
+    A = system.A[keep]
     s = singular_values(J)
     qc = s[:, 0] / np.maximum(s[:, 1], np.finfo(float).tiny)
     return float((qc * A).sum() / A.sum())
 
 
-def _face_log_scale(system, uv):
-    W = uv[system.F]
+def _face_log_scale(system, uv, keep=slice(None)):
+    """Realised log scale 0.5 log(A_uv / A_3d) of the triangles ``keep``, or None if any flips."""
+    W = uv[system.F[keep]]
     e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
     a = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
     if not np.all(a > 0):
         return None
-    return 0.5 * np.log(a / system.A)
+    return 0.5 * np.log(a / system.A[keep])
 
 
 def boundary_basis(system, n_freq):
@@ -97,33 +99,40 @@ def _model_lp(s, JF, c, delta, reg_w, active, max_rounds=5):
 
 
 def optimise(system, n_freq=None, max_iter=12, max_maps=16, qc_slack=None, active=200, reg=1e-3,
-             progress=None):
+             progress=None, real_faces=None):
     """Maximise the realised ``min mu / max mu`` over smooth boundary scale factors.
 
     system: ``DiskSystem``. n_freq: Fourier modes of u_B (default grows with the boundary length, at
     most 24). max_iter: outer steps (each builds at most three maps); max_maps: maps built in all. qc_slack: allowed rise of the
     area-weighted mean quasi-conformal distortion over the ``area`` map (default: half its excess over
     1, at least 0.002). active: faces per side the LP starts from. reg: weight of the step-length
-    term (per unit of |coefficient| times frequency, relative to the spread).
+    term (per unit of |coefficient| times frequency, relative to the spread). real_faces: optional
+    (m,) bool; only these triangles count in the objective and the conformality budget.
     Returns ``u`` (n,), ``uv`` (n,2) and a dict for the report."""
     progress = progress or (lambda f, msg: None)
     nb = len(system.B)
     if n_freq is None:
         n_freq = int(np.clip(nb // 8, 1, 24))
     Phi, freq = boundary_basis(system, n_freq)
+    keep = slice(None) if real_faces is None else np.asarray(real_faces, bool)
+
+    def log_scale(uv):
+        s = _face_log_scale(system, uv, keep)
+        return s
+
     u0 = system.yamabe(np.zeros(nb))
     uv0 = system.map_from_u(u0)
-    s0 = _face_log_scale(system, uv0)
+    s0 = log_scale(uv0)
     if s0 is None:
         raise ConformalError("the area-preserving map already folds: the mesh has triangles too "
                              "degenerate to flatten; clean it up (merge by distance, dissolve degenerate)")
-    qc0 = _qc_mean(system, uv0)
+    qc0 = _qc_mean(system, uv0, keep)
     if qc_slack is None:
         qc_slack = max(0.5 * (qc0 - 1.0), 0.002)
     qc_budget = qc0 + qc_slack
     progress(0.15, 'boundary response')
     H = system.harmonic(Phi)                          # (n, K): response of u to the coefficients
-    JF = H[system.F].mean(axis=1)                     # (m, K): linear model of s_T
+    JF = H[system.F[keep]].mean(axis=1)               # (m, K): linear model of s_T
     best = dict(c=np.zeros(Phi.shape[1]), u=u0, uv=uv0, s=s0, spread=float(s0.max() - s0.min()),
                 qc=qc0)
     delta = best['spread']
@@ -143,13 +152,13 @@ def optimise(system, n_freq=None, max_iter=12, max_maps=16, qc_slack=None, activ
                 uv = system.map_from_u(u)
             except ConformalError:
                 continue
-            s_new = _face_log_scale(system, uv)
+            s_new = log_scale(uv)
             if s_new is None:
                 continue
             spread = float(s_new.max() - s_new.min())
             if spread >= best['spread'] - 1e-6:
                 continue
-            qc = _qc_mean(system, uv)
+            qc = _qc_mean(system, uv, keep)
             if qc > qc_budget:
                 continue
             best = dict(c=cand, u=u, uv=uv, s=s_new, spread=spread, qc=qc)
@@ -169,16 +178,23 @@ def optimise(system, n_freq=None, max_iter=12, max_maps=16, qc_slack=None, activ
     return best['u'], best['uv'], opt
 
 
-def vertex_bound(system, tol=1e-9, batch=64, max_rounds=50):
+def vertex_bound(system, tol=1e-9, batch=64, max_rounds=50, real_faces=None):
     """Certified vertex-level optimum: the ratio ``exp(-(max u - min u))`` at the best ``u_B`` over all
     boundary values (the linear program of DESIGN.md section 2). Active set over interior vertices:
-    rows of ``-L_II^-1 L_IB`` are added for the vertices that violate the current bounds."""
+    rows of ``-L_II^-1 L_IB`` are added for the vertices that violate the current bounds.
+    real_faces: optional (m,) bool; only vertices of these triangles are constrained."""
     nb, nI = len(system.B), len(system.I)
     u0 = system.yamabe(np.zeros(nb))
     if nI == 0:
         return 1.0
     uI = u0[system.I]
+    counted = np.ones(nI, bool)
+    if real_faces is not None:
+        used = np.zeros(system.n, bool)
+        used[system.F[np.asarray(real_faces, bool)]] = True
+        counted = used[system.I]
     order = np.argsort(uI)
+    order = order[counted[order]]
     R = np.unique(np.r_[order[:batch], order[-batch:]])
     rows = _response_rows(system, R)
     for _ in range(max_rounds):
@@ -200,7 +216,7 @@ def vertex_bound(system, tol=1e-9, batch=64, max_rounds=50):
             raise ConformalError(f"the bound's linear program failed: {res.message}")
         uB, t1, t0 = res.x[:nb], res.x[nb], res.x[nb + 1]
         u = system.yamabe(uB)[system.I]
-        viol = np.maximum(u - t1, t0 - u)
+        viol = np.where(counted, np.maximum(u - t1, t0 - u), -np.inf)
         cand = np.setdiff1d(np.nonzero(viol > tol * max(1.0, t1 - t0))[0], R)
         if len(cand) == 0:
             return float(np.exp(-(t1 - t0)))
