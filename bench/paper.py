@@ -202,8 +202,12 @@ def main():
     V, F = make_surface('bump', n)
     ref_path = os.path.join(ROOT, 'tests', 'data', f'geodesic_ref_bump_{n}.npz')
     ref = np.load(ref_path) if os.path.exists(ref_path) else None
+    have_geo = importlib.util.find_spec('core.geodesic') is not None
     print(f"bump, n = {n} ({len(V)} vertices, {len(F)} triangles); geodesic grid {args.grid}"
-          + ("" if ref is not None else f"; no reference {os.path.basename(ref_path)}: no geodesic columns"))
+          + ("" if ref is not None else f"; no reference {os.path.basename(ref_path)}: no geodesic columns")
+          + ("" if have_geo else "; core.geodesic missing: no geodesic columns"))
+    if not have_geo:
+        ref = None
     rows, figmaps, conforming = [], {}, {}
 
     def midedge_row(label, mm, seconds):
