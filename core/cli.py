@@ -16,6 +16,7 @@ COMMANDS = {
     'sphere': ('cmd_sphere', 'map a closed genus-0 mesh conformally to the unit sphere (OBJ out)'),
     'reconstruct': ('cmd_reconstruct', 'recover a metric on a disk mesh from travel times (CSV)'),
     'reconstruct-demo': ('cmd_reconstruct_demo', 'metric reconstruction experiment of the paper, section 8.2'),
+    'geodesic': ('cmd_geodesic', 'geodesic distances from source vertices by fast marching on the conformal map'),
 }
 
 

@@ -1,0 +1,77 @@
+"""Regenerate the exact polyhedral geodesic references in ``tests/data/`` with pygeodesic (exact MMP,
+a dev-only dependency: requirements-dev.txt).
+
+    .venv/bin/python bench/make_refdata.py            # writes tests/data/geodesic_ref_*.npz
+    .venv/bin/python bench/make_refdata.py --check    # only the flat-square sanity check
+
+Each file ``geodesic_ref_<surface>_<n>.npz`` holds ``sources`` (k,) int32 vertex indices and
+``dist`` (k, n*n) float32 exact distances from each source to every vertex of
+``core.surfaces.make_surface(surface, n)``. The generator first checks pygeodesic on a flat square,
+where the exact answer is the Euclidean distance."""
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from core.surfaces import make_surface  # noqa: E402
+
+DATA = os.path.join(ROOT, 'tests', 'data')
+
+# (surface, n, sources): corner (-2,-2) is vertex 0, the centre is (n//2)*n + n//2, the midpoint
+# of the edge y = -2 is n//2.
+REFS = (
+    ('bump', 129, (0, 8320, 64)),
+    ('bump', 65, (0, 2112, 32)),
+    ('edgebump', 65, (0, 2112, 32)),
+)
+
+
+def exact_distances(V, F, sources):
+    """(k, n) float64 exact polyhedral geodesic distances from each vertex in ``sources``."""
+    from pygeodesic import geodesic
+    alg = geodesic.PyGeodesicAlgorithmExact(np.ascontiguousarray(V, np.float64),
+                                            np.ascontiguousarray(F, np.int32))
+    out = []
+    for s in sources:
+        d, _ = alg.geodesicDistances(np.array([s], np.int32), None)
+        out.append(d)
+    return np.array(out)
+
+
+def check_flat():
+    """pygeodesic on a flat square must give Euclidean distances."""
+    V, F = make_surface('flat', 33)
+    src = (0, 544, 16)
+    D = exact_distances(V, F, src)
+    E = np.linalg.norm(V[None, :, :] - V[list(src)][:, None, :], axis=2)
+    err = np.abs(D - E).max()
+    print(f"flat square 33x33: max |pygeodesic - Euclidean| = {err:.2e}")
+    if err > 1e-9:
+        raise SystemExit("pygeodesic does not reproduce Euclidean distances on a flat square")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--check', action='store_true', help='only run the flat-square check')
+    args = ap.parse_args(argv)
+    check_flat()
+    if args.check:
+        return 0
+    for name, n, sources in REFS:
+        V, F = make_surface(name, n)
+        t = time.perf_counter()
+        D = exact_distances(V, F, sources)
+        path = os.path.join(DATA, f'geodesic_ref_{name}_{n}.npz')
+        np.savez_compressed(path, sources=np.array(sources, np.int32), dist=D.astype(np.float32))
+        print(f"{name} n={n} sources {sources}: {time.perf_counter() - t:.1f} s, max distance "
+              f"{D.max():.4f} -> {os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
