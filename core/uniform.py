@@ -98,7 +98,7 @@ def _model_lp(s, JF, c, delta, reg_w, active, max_rounds=5):
     return a, float(model.max() - model.min())
 
 
-def optimise(system, n_freq=None, max_iter=12, max_maps=16, qc_slack=None, active=200, reg=1e-3,
+def optimise(system, n_freq=None, max_iter=6, max_maps=8, qc_slack=None, active=200, reg=1e-3,
              progress=None, real_faces=None):
     """Maximise the realised ``min mu / max mu`` over smooth boundary scale factors.
 
@@ -112,7 +112,7 @@ def optimise(system, n_freq=None, max_iter=12, max_maps=16, qc_slack=None, activ
     progress = progress or (lambda f, msg: None)
     nb = len(system.B)
     if n_freq is None:
-        n_freq = int(np.clip(nb // 8, 1, 24))
+        n_freq = int(np.clip(nb // 8, 1, 16))
     Phi, freq = boundary_basis(system, n_freq)
     keep = slice(None) if real_faces is None else np.asarray(real_faces, bool)
 
