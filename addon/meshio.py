@@ -317,3 +317,125 @@ class Progress:
             except (AttributeError, RuntimeError):
                 pass
         return False
+
+
+# --- edges, seams and selections (islands, Edit-mode selections) ---------------------------------
+SELECTION_ATTRIBUTES = ('.select_vert', '.select_edge', '.select_poly',
+                        '.uv_select_vert', '.uv_select_edge', '.uv_select_face')
+_UV_SELECTION = SELECTION_ATTRIBUTES[3:]
+
+
+def read_edges(me):
+    """(e,2) int64 vertex pairs of the mesh's edges (call in Object mode)."""
+    buf = np.empty(2 * len(me.edges), np.int32)
+    attr = me.attributes.get('.edge_verts')
+    if attr is not None and attr.data_type == 'INT32_2D':
+        attr.data.foreach_get('value', buf)
+    else:
+        me.edges.foreach_get('vertices', buf)
+    return buf.reshape(-1, 2).astype(np.int64)
+
+
+def read_corner_edges(me):
+    """(c,) int64 edge of each corner (the edge from the corner's vertex to the next corner's)."""
+    buf = np.empty(len(me.loops), np.int32)
+    if len(buf):
+        attr = me.attributes.get('.corner_edge')
+        if attr is not None:
+            attr.data.foreach_get('value', buf)
+        else:
+            me.loops.foreach_get('edge_index', buf)
+    return buf.astype(np.int64)
+
+
+def read_seams(me):
+    """(e,) bool: edges marked as UV seams (``use_seam``). Reads the boolean edge attribute directly
+    (``uv_seam`` in Blender 5, ``.uv_seam`` before); a mesh without seams has no such attribute."""
+    out = np.zeros(len(me.edges), bool)
+    for name in ('uv_seam', '.uv_seam'):
+        attr = me.attributes.get(name)
+        if attr is not None and attr.domain == 'EDGE' and attr.data_type == 'BOOLEAN':
+            attr.data.foreach_get('value', out)
+            return out
+    if len(out):
+        me.edges.foreach_get('use_seam', out)
+    return out
+
+
+def read_point_float(me, name):
+    """(n,) float64 values of the FLOAT point attribute ``name``, or None if it is absent or has
+    another type or domain."""
+    attr = me.attributes.get(name)
+    if attr is None or attr.domain != 'POINT' or attr.data_type != 'FLOAT':
+        return None
+    buf = np.empty(len(me.vertices), np.float32)
+    attr.data.foreach_get('value', buf)
+    return buf.astype(np.float64)
+
+
+def save_attributes(me, names=SELECTION_ATTRIBUTES):
+    """Snapshot of the BOOLEAN attributes ``names`` of ``me``: name -> (domain, values) or None when
+    absent. ``restore_attributes`` puts them back bitwise (and removes those that were absent)."""
+    saved = {}
+    for name in names:
+        attr = me.attributes.get(name)
+        if attr is None or attr.data_type != 'BOOLEAN':
+            saved[name] = None
+            continue
+        buf = np.zeros(len(attr.data), bool)
+        attr.data.foreach_get('value', buf)
+        saved[name] = (attr.domain, buf)
+    return saved
+
+
+def restore_attributes(me, saved):
+    """Undo changes to the attributes snapshotted by ``save_attributes``."""
+    for name, entry in saved.items():
+        attr = me.attributes.get(name)
+        if entry is None:
+            if attr is not None:
+                me.attributes.remove(attr)
+            continue
+        domain, values = entry
+        if attr is not None and (attr.domain != domain or attr.data_type != 'BOOLEAN'
+                                 or len(attr.data) != len(values)):
+            me.attributes.remove(attr)
+            attr = None
+        if attr is None:
+            attr = me.attributes.new(name, 'BOOLEAN', domain)
+        attr.data.foreach_set('value', values)
+    me.update()
+
+
+def _set_bool(me, name, domain, values):
+    attr = me.attributes.get(name)
+    if attr is not None and (attr.domain != domain or attr.data_type != 'BOOLEAN'):
+        me.attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = me.attributes.new(name, 'BOOLEAN', domain)
+    attr.data.foreach_set('value', np.ascontiguousarray(values, bool))
+
+
+def select_faces_only(me, faces, corner_verts=None, corner_edges=None):
+    """Select exactly the polygons ``faces`` ((p,) bool), their vertices and edges, and drop the
+    separate UV selection so that UV tools in sync-select mode act on these faces (Object mode).
+    Snapshot the selection with ``save_attributes`` first to put it back."""
+    faces = np.asarray(faces, bool)
+    cv = read_corner_verts(me) if corner_verts is None else corner_verts
+    ce = read_corner_edges(me) if corner_edges is None else corner_edges
+    start = read_loop_start(me)
+    sizes = np.diff(np.r_[start, len(cv)])
+    corner_on = np.repeat(faces, sizes)
+    verts = np.zeros(len(me.vertices), bool)
+    verts[cv[corner_on]] = True
+    edges = np.zeros(len(me.edges), bool)
+    edges[ce[corner_on]] = True
+    _set_bool(me, '.select_vert', 'POINT', verts)
+    _set_bool(me, '.select_edge', 'EDGE', edges)
+    _set_bool(me, '.select_poly', 'FACE', faces)
+    for name in _UV_SELECTION:
+        attr = me.attributes.get(name)
+        if attr is not None:
+            me.attributes.remove(attr)
+    me.update()
