@@ -10,6 +10,7 @@ MODULES = (
     'ui',
     'ops_sphere',
     'ops_metric',
+    'ops_geodesic',
 )
 
 

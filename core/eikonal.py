@@ -15,7 +15,6 @@ import numpy as np
 from .errors import ConformalError
 
 PAD = 2
-MONO = True
 
 
 class _Sweeper:
@@ -75,16 +74,17 @@ def _update(T, idx, nb, fh, order):
     return np.where(both, np.where(disc >= 0, two, np.minimum(cx, cy)), one)
 
 
-def sweep(T0, speed, h, mask=None, order=2, tol=1e-9, max_iter=60, first_iter=1):
+def sweep(T0, speed, h, mask=None, order=2, tol=1e-9, max_iter=60, first_iter=1, info=None):
     """Solve ``|grad T| = 1 / speed`` with fixed values ``T0`` where ``T0`` is finite.
 
     T0 (ny, nx): initial times, finite at the fixed (source) nodes, inf elsewhere. speed (ny, nx) > 0.
     h: grid spacing. mask (ny, nx) bool or None: True nodes are excluded (obstacles, returned inf).
     order: 1 or 2. ``first_iter`` rounds of four first-order sweeps (None: to convergence) give a
-    monotone first guess, then sweeps of the requested order run to convergence (at most
-    ``max_iter`` rounds); ``tol`` is the stopping change relative to the largest finite time.
-    ``sweep.last_iterations`` holds the rounds per phase. Returns T (ny, nx) float64
-    (inf at masked nodes and at nodes no front reaches)."""
+    first guess from above, then rounds of the requested order run until the largest change is at
+    most ``tol`` times the largest finite time (at most ``max_iter`` rounds). Values only decrease
+    (``T = min(T, update)``), which keeps the second-order sweeps from oscillating. ``info``: an
+    optional dict that receives ``rounds`` (per phase). Returns T (ny, nx) float64 (inf at masked
+    nodes and at nodes no front reaches)."""
     T0 = np.asarray(T0, np.float64)
     speed = np.asarray(speed, np.float64)
     if T0.ndim != 2 or speed.shape != T0.shape:
@@ -107,32 +107,31 @@ def sweep(T0, speed, h, mask=None, order=2, tol=1e-9, max_iter=60, first_iter=1)
     fh = fhp.ravel()
     S = _Sweeper(T0.shape, free)
     orders = [[(idx, nb, fh[idx]) for idx, nb in groups] for groups in S.orders]
-    iterations = []
-    phases = ((1, 2) if order == 2 else (1,))
-    if first_iter == 0:
-        phases = (order,)
-    for o in phases:
-        for it in range(max_iter if (o == order or first_iter is None) else first_iter):
+    rounds = []
+    if order == 1 or first_iter == 0:
+        phases = ((order, max_iter),)
+    else:
+        phases = ((1, max_iter if first_iter is None else first_iter), (2, max_iter))
+    for o, limit in phases:
+        done = 0
+        for done in range(1, limit + 1):
             change = 0.0
             for groups in orders:
                 for idx, nb, f in groups:
-                    new = _update(T, idx, nb, f, o)
                     old = T[idx]
-                    if o == 1 or MONO:
-                        new = np.minimum(new, old)
-                    moved = new != old
+                    new = np.minimum(_update(T, idx, nb, f, o), old)
+                    moved = new < old
                     if moved.any():
-                        d = np.abs(new[moved] - old[moved])
-                        change = max(change, float(d.max()) if np.isfinite(d).all() else np.inf)
+                        change = max(change, float((old[moved] - new[moved]).max()))
                         T[idx] = new
             fin = np.isfinite(T)
-            scale = float(T[fin].max())
-            if change <= tol * scale:
+            if change <= tol * float(T[fin].max()):
                 break
-        iterations.append(it + 1)
+        rounds.append(done)
     out = Tp[PAD:-PAD, PAD:-PAD].copy()
     out[mask] = np.inf
-    sweep.last_iterations = iterations
+    if info is not None:
+        info['rounds'] = rounds
     return out
 
 

@@ -31,6 +31,9 @@ SOLVERS = ('auto', 'skfmm', 'sweep')
 MU_MODES = ('vertex', 'face')
 GRID_MIN, GRID_MAX = 64, 8192
 RIM = 1
+# default seed disk radius in cells: the sweep's second-order stencil is less accurate on strongly
+# curved fronts than fast marching's, so it starts from a larger exact disk (see docs/geodesic.md)
+SEED_RADIUS = {'skfmm': 24.0, 'sweep': 36.0}
 
 
 # --------------------------------------------------------------------------------------------------
@@ -345,6 +348,26 @@ def calibrate_phi(D, valid, h):
     return phi
 
 
+def resolve_solver(solver):
+    """'skfmm' or 'sweep' for a requested ``solver`` ('auto' picks scikit-fmm if it imports)."""
+    if solver not in SOLVERS:
+        raise ConformalError(f"unknown solver {solver!r}: use one of {', '.join(SOLVERS)}")
+    if solver == 'sweep':
+        return solver
+    try:
+        import skfmm  # noqa: F401
+    except ImportError:
+        if solver == 'skfmm':
+            raise ConformalError("scikit-fmm is not installed: use solver 'sweep' or 'auto'") from None
+        return 'sweep'
+    return 'skfmm'
+
+
+def solver_name():
+    """A label of the solver ``solver='auto'`` will use (for user interfaces)."""
+    return "scikit-fmm" if resolve_solver('auto') == 'skfmm' else "built-in fast sweeping (no scikit-fmm)"
+
+
 def march(T_seed, seed, phi, speed, mask, h, solver='auto'):
     """Travel times on the grid from the seed nodes (``seed`` (ny, nx) True) whose exact times are
     ``T_seed`` (ny, nx); ``phi`` (ny, nx) is negative exactly on the seed, its zero contour the
@@ -354,24 +377,22 @@ def march(T_seed, seed, phi, speed, mask, h, solver='auto'):
     travel time from the zero contour of ``phi``, order 2, plus the seed rim time), 'sweep'
     (``core.eikonal.sweep``, pure numpy, order 2, the seed held fixed), or 'auto' (scikit-fmm if it
     imports). Returns (T, solver name)."""
-    if solver not in SOLVERS:
-        raise ConformalError(f"unknown solver {solver!r}: use one of {', '.join(SOLVERS)}")
-    if solver in ('auto', 'skfmm'):
-        try:
-            import skfmm
-        except ImportError:
-            if solver == 'skfmm':
-                raise ConformalError("scikit-fmm is not installed: use solver 'sweep' or 'auto'") from None
-            solver = 'sweep'
-        else:
-            solver = 'skfmm'
+    solver = resolve_solver(solver)
     if solver == 'skfmm':
+        import skfmm
         T = skfmm.travel_time(np.ma.MaskedArray(phi, mask), np.where(mask, 1.0, speed), dx=h, order=2)
         T = np.ma.filled(np.ma.MaskedArray(T), np.inf).astype(np.float64)
         T[mask] = np.inf
         return T, 'skfmm'
     from .eikonal import sweep
-    T = sweep(np.where(seed, T_seed, np.inf), speed, h, mask=mask, order=2)
+    # hold the same nodes as scikit-fmm does: the seed and its outer ring (4-neighbours)
+    held = seed.copy()
+    held[1:] |= seed[:-1]
+    held[:-1] |= seed[1:]
+    held[:, 1:] |= seed[:, :-1]
+    held[:, :-1] |= seed[:, 1:]
+    held &= ~mask & np.isfinite(T_seed)
+    T = sweep(np.where(held, T_seed, np.inf), speed, h, mask=mask, order=2)
     return T, 'sweep'
 
 
@@ -400,7 +421,7 @@ def _groups(mu_s):
 
 
 def geodesic_distance(V, F, sources=None, points=None, uv=None, boundary='uniform', grid=None,
-                      solver='auto', mu_mode='vertex', source_radius=24.0, calibrate=True, progress=None):
+                      solver='auto', mu_mode='vertex', source_radius=None, calibrate=True, progress=None):
     """Geodesic distances from a set of sources to every vertex, by fast marching on the conformal plane.
 
     V (n,3) float, F (m,3) int triangles (a disk). ``sources``: vertex indices (k,) and/or ``points``:
@@ -410,7 +431,7 @@ def geodesic_distance(V, F, sources=None, points=None, uv=None, boundary='unifor
     ``default_grid``). ``solver``: 'auto' (scikit-fmm if installed, else the numpy sweep), 'skfmm' or
     'sweep'. ``mu_mode``: 'vertex' (per-vertex mu interpolated linearly, default) or 'face' (per
     triangle, piecewise constant). ``source_radius``: radius of the exact seed disk in grid cells
-    (``seed_radius`` may reduce it). ``calibrate``: make scikit-fmm's start values on the seed rim
+    (None: ``SEED_RADIUS`` of the solver; ``seed_radius`` may reduce it). ``calibrate``: make scikit-fmm's start values on the seed rim
     exact (``calibrate_phi``). ``progress(fraction, message)``: optional callback.
 
     Returns ``(dist, report)``: ``dist`` (n,) float64 in mesh units (vertices on no triangle get NaN);
@@ -426,8 +447,9 @@ def geodesic_distance(V, F, sources=None, points=None, uv=None, boundary='unifor
         raise ConformalError("a triangle refers to a vertex that does not exist")
     if mu_mode not in MU_MODES:
         raise ConformalError(f"unknown mu_mode {mu_mode!r}: use one of {', '.join(MU_MODES)}")
-    if solver not in SOLVERS:
-        raise ConformalError(f"unknown solver {solver!r}: use one of {', '.join(SOLVERS)}")
+    solver = resolve_solver(solver)
+    if source_radius is None:
+        source_radius = SEED_RADIUS[solver]
     if not source_radius >= 1.0:
         raise ConformalError("source_radius must be at least 1 grid cell")
     _source_points(V, F, np.zeros((len(V), 2)), sources, points)      # validate before any work

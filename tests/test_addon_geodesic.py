@@ -1,0 +1,179 @@
+"""The geodesic distance operator against the real bpy module: attributes written and in range,
+sources from the Edit-mode selection, the active vertex and the 3D cursor, reuse of the flattening,
+and failures that leave the mesh untouched."""
+import json
+
+import bpy
+import numpy as np
+import pytest
+
+N = 33
+
+
+def bump_object(bl, n=N, name='bump'):
+    from conformal_flatten.core.surfaces import make_surface
+    V, F = make_surface('bump', n)
+    V = V.astype(np.float32).astype(float)
+    return bl.mesh_object(name, V, F), V, F
+
+
+def point_attr(me, name, width=1, field='value'):
+    a = me.attributes[name]
+    buf = np.empty(len(a.data) * width, np.float32)
+    a.data.foreach_get(field, buf)
+    return buf.reshape(-1, width) if width > 1 else buf
+
+
+def report_of(me):
+    return json.loads(me['conformal_geodesic_report'])
+
+
+def select_vertices(obj, indices, active=None):
+    import bmesh
+    bpy.ops.object.mode_set(mode='EDIT')
+    bpy.context.tool_settings.mesh_select_mode = (True, False, False)
+    bm = bmesh.from_edit_mesh(obj.data)
+    bm.verts.ensure_lookup_table()
+    bm.select_history.clear()
+    for v in bm.verts:
+        v.select_set(v.index in set(indices))
+    if active is not None:
+        bm.verts[active].select_set(True)
+        bm.select_history.add(bm.verts[active])
+    bm.select_flush_mode()
+    bmesh.update_edit_mesh(obj.data)
+
+
+def test_operator_registered_with_flags(addon):
+    assert bpy.ops.mesh.conformal_geodesic_distance.bl_options == {'REGISTER', 'UNDO'}
+    props = bpy.ops.mesh.conformal_geodesic_distance.get_rna_type().properties
+    assert props['grid'].default == 0
+    assert hasattr(bpy.types, 'VIEW3D_PT_conformal_geodesic')
+    assert bpy.types.VIEW3D_PT_conformal_geodesic.bl_parent_id == 'VIEW3D_PT_conformal_flatten'
+
+
+def test_attributes_written_and_in_range_edit_selection(addon, bl):
+    from conformal_flatten.core.geodesic import geodesic_distance
+    obj, V, F = bump_object(bl)
+    src = [0, (N // 2) * N + N // 2]
+    select_vertices(obj, src)
+    assert bpy.ops.mesh.conformal_geodesic_distance(grid=512, boundary='AREA') == {'FINISHED'}
+    assert obj.mode == 'EDIT'
+    bpy.ops.object.mode_set(mode='OBJECT')
+    me = obj.data
+    a = me.attributes['geodesic_distance']
+    assert (a.domain, a.data_type) == ('POINT', 'FLOAT')
+    d = point_attr(me, 'geodesic_distance')
+    assert np.isfinite(d).all() and d.min() >= 0
+    assert d[src].max() < 1e-6
+    # bounded by the Euclidean distance below and by a long path above
+    E = np.min([np.linalg.norm(V - V[s], axis=1) for s in src], axis=0)
+    assert (d >= E * (1 - 2e-3) - 1e-6).all()
+    assert d.max() < 2.0 * E.max()
+    ref, _ = geodesic_distance(V, F, src, boundary='area', grid=512)
+    np.testing.assert_allclose(d, ref, rtol=1e-5, atol=1e-5)
+    c = me.color_attributes['geodesic_distance_color']
+    assert (c.domain, c.data_type) == ('POINT', 'FLOAT_COLOR')
+    rgba = point_attr(me, 'geodesic_distance_color', 4, 'color')
+    assert np.isfinite(rgba).all() and rgba.min() >= 0 and rgba.max() <= 1
+    assert np.allclose(rgba[:, 3], 1)
+    assert me.color_attributes.active_color_name == 'geodesic_distance_color'
+    lo, hi = me['geodesic_distance_range']
+    assert lo == pytest.approx(0, abs=1e-6) and hi == pytest.approx(float(d.max()), rel=1e-6)
+    rep = report_of(me)
+    assert rep['source_count'] == 2 and rep['flattening'] == 'computed' and rep['grid'][0] == 512
+    # the selection is untouched
+    sel = np.zeros(len(V), bool)
+    me.attributes['.select_vert'].data.foreach_get('value', sel)
+    assert sorted(np.flatnonzero(sel)) == sorted(src)
+
+
+def test_active_vertex_then_cursor(addon, bl):
+    obj, V, F = bump_object(bl)
+    me = obj.data
+    # Edit mode, no vertex selected but one still active in the selection history
+    import bmesh
+    select_vertices(obj, [], active=40)
+    bm = bmesh.from_edit_mesh(me)
+    bm.verts.ensure_lookup_table()
+    bm.verts[40].select_set(False)
+    bmesh.update_edit_mesh(me)
+    assert not any(v.select for v in bm.verts) and bm.select_history.active.index == 40
+    bpy.ops.mesh.conformal_geodesic_distance(grid=256, source='AUTO', boundary='AREA')
+    bpy.ops.object.mode_set(mode='OBJECT')
+    d = point_attr(me, 'geodesic_distance')
+    assert int(np.argmin(d)) == 40 and d[40] < 1e-6
+    assert report_of(me)['source_description'] == 'the active vertex'
+    # Object mode: the vertex nearest the 3D cursor (object transform applied)
+    obj.location = (1.0, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    k = 5 * N + 20
+    bpy.context.scene.cursor.location = tuple(np.array(V[k]) + np.array([1.0, 0.0, 0.02]))
+    assert bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA') == {'FINISHED'}
+    d = point_attr(me, 'geodesic_distance')
+    assert int(np.argmin(d)) == k
+    assert 'cursor' in report_of(me)['source_description']
+
+
+def test_flattening_is_reused_until_the_mesh_changes(addon, bl):
+    obj, V, F = bump_object(bl)
+    me = obj.data
+    bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA')
+    assert report_of(me)['flattening'] == 'computed'
+    first = point_attr(me, 'geodesic_distance').copy()
+    bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA')
+    assert report_of(me)['flattening'] == 'geodesic cache'
+    np.testing.assert_allclose(point_attr(me, 'geodesic_distance'), first, rtol=1e-5, atol=1e-6)
+    # another boundary mode: flattened again
+    bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='FREE')
+    assert report_of(me)['flattening'] == 'computed'
+    # move a vertex: the stored map no longer applies
+    bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA')
+    me.vertices[N * N // 2].co.z += 0.3
+    me.update()
+    bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA')
+    assert report_of(me)['flattening'] == 'computed'
+
+
+def test_reuses_the_flatten_operators_map(addon, bl):
+    obj, V, F = bump_object(bl)
+    me = obj.data
+    assert bpy.ops.uv.conformal_flatten(boundary='AREA', fit='UNIT_SQUARE', bake=False) == {'FINISHED'}
+    assert bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA') == {'FINISHED'}
+    assert report_of(me)['flattening'] == 'flatten operator'
+    d = point_attr(me, 'geodesic_distance')
+    from conformal_flatten.core.geodesic import geodesic_distance
+    ref, _ = geodesic_distance(V, F, [int(np.argmin(d))], boundary='area', grid=256)
+    np.testing.assert_allclose(d, ref, rtol=1e-4, atol=1e-4)
+
+
+def test_bands_change_only_the_colours(addon, bl):
+    obj, V, F = bump_object(bl)
+    me = obj.data
+    bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA', bands=0)
+    plain = point_attr(me, 'geodesic_distance_color', 4, 'color').copy()
+    d0 = point_attr(me, 'geodesic_distance').copy()
+    bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA', bands=8)
+    banded = point_attr(me, 'geodesic_distance_color', 4, 'color')
+    np.testing.assert_allclose(point_attr(me, 'geodesic_distance'), d0, rtol=1e-5, atol=1e-6)
+    darker = (banded[:, :3] < plain[:, :3] - 1e-4).all(1)
+    assert 0.3 < darker.mean() < 0.7                          # about every other band
+
+
+def test_failure_leaves_the_mesh_untouched(addon, bl):
+    from conformal_flatten.core.surfaces import make_surface
+    # a closed surface cannot be flattened as a disk
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
+    obj = bpy.context.active_object
+    before = bl.mesh_snapshot(obj.data)
+    with pytest.raises(RuntimeError):
+        bpy.ops.mesh.conformal_geodesic_distance(grid=256)
+    bl.assert_same(before, bl.mesh_snapshot(obj.data))
+    # 'SELECTED' with nothing selected: a clear error, nothing written
+    obj2, V, F = bump_object(bl, name='bump2')
+    obj2.data.attributes['.select_vert'].data.foreach_set('value', np.zeros(len(V), bool)) \
+        if obj2.data.attributes.get('.select_vert') else None
+    before = bl.mesh_snapshot(obj2.data)
+    with pytest.raises(RuntimeError, match='no vertex'):
+        bpy.ops.mesh.conformal_geodesic_distance(grid=256, source='SELECTED')
+    bl.assert_same(before, bl.mesh_snapshot(obj2.data))
