@@ -66,9 +66,10 @@ PACKER_ITEMS = [
     ('SHELF', "Shelf", "The core's shelf packing of the islands' bounding boxes (fast)"),
 ]
 SHAPE_ITEMS = [
-    ('CONCAVE', "Exact Shape", "Pack Islands uses the exact island shapes (slowest, tightest)"),
-    ('CONVEX', "Convex Hull", "Pack Islands uses the islands' convex hulls"),
-    ('AABB', "Bounding Box", "Pack Islands uses bounding boxes (fastest)"),
+    ('AABB', "Bounding Box", "Pack Islands uses bounding boxes, as Blender's Unwrap does (fast)"),
+    ('CONCAVE', "Exact Shape", "Pack Islands uses the exact island shapes (tighter; seconds for a few "
+                               "dozen islands)"),
+    ('CONVEX', "Convex Hull", "Pack Islands uses the islands' convex hulls (can be much slower)"),
 ]
 
 
@@ -107,7 +108,7 @@ class FlattenOptions:
     keep_relative_scale: bool = True
     skip_bad_islands: bool = False
     packer: str = 'BLENDER'
-    pack_shape: str = 'CONCAVE'
+    pack_shape: str = 'AABB'
     pack_rotate: bool = True
     margin: float = 0.001
     shared_layout: bool = False
@@ -802,7 +803,7 @@ class UV_OT_conformal_flatten(bpy.types.Operator):
                                                "an error")
     packer: EnumProperty(name="Packing", items=PACKER_ITEMS, default='BLENDER',
                          description="How the islands are arranged without overlap")
-    pack_shape: EnumProperty(name="Pack Shape", items=SHAPE_ITEMS, default='CONCAVE',
+    pack_shape: EnumProperty(name="Pack Shape", items=SHAPE_ITEMS, default='AABB',
                              description="Shape Pack Islands uses for each island")
     pack_rotate: BoolProperty(name="Rotate Islands", default=True,
                               description="Pack Islands may rotate islands (a rotation keeps the map "
@@ -818,6 +819,29 @@ class UV_OT_conformal_flatten(bpy.types.Operator):
     def poll(cls, context):
         # Deliberately permissive: a wrong selection gets an ERROR report that says what to do.
         return True
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        col = layout.column()
+        col.prop(self, 'boundary')
+        col.prop(self, 'fit')
+        col.prop(self, 'bake')
+        col = layout.column(heading="Islands")
+        col.prop(self, 'fill_holes')
+        sub = col.row()
+        sub.active = not self.fill_holes
+        sub.prop(self, 'cut_holes')
+        col.prop(self, 'keep_relative_scale')
+        col.prop(self, 'skip_bad_islands')
+        col = layout.column(heading="Packing")
+        col.prop(self, 'packer')
+        sub = col.column()
+        sub.active = self.packer == 'BLENDER'
+        sub.prop(self, 'pack_shape')
+        sub.prop(self, 'pack_rotate')
+        sub.prop(self, 'margin')
+        col.prop(self, 'shared_layout')
 
     def flatten_options(self, context):
         return FlattenOptions(boundary=self.boundary, fit=self.fit, bake=self.bake,
@@ -889,7 +913,7 @@ class UV_OT_conformal_flatten(bpy.types.Operator):
             self._cleanup(context)
             self.report({'WARNING'}, "Conformal flatten cancelled: nothing was written")
             return {'CANCELLED'}
-        if event.type != 'TIMER' or event.timer is not self._timer:
+        if event.type != 'TIMER':
             return {'RUNNING_MODAL'}        # block other input while the meshes are being flattened
         context.window_manager.progress_update(int(1000 * min(1.0, run.fraction)))
         try:

@@ -217,7 +217,7 @@ def test_suzanne_island_by_island(addon, bl):
     check_islands_layout(me, qc_max=1.8)
     n = mark_seams(me, lambda a, b: (np.abs(a[:, 0]) < 1e-5) & (np.abs(b[:, 0]) < 1e-5))
     assert n > 0
-    bpy.ops.uv.conformal_flatten(boundary='UNIFORM')
+    bpy.ops.uv.conformal_flatten(boundary='UNIFORM', pack_shape='CONCAVE')
     rep = report_of(me)
     assert rep['islands'] == 4 and rep['holes_filled'] == 2 and rep['flips'] == 0
     assert [r['triangles'] for r in rep['island_reports']] == [56, 56, 428, 428]
@@ -461,7 +461,7 @@ def test_several_objects_shared_layout_and_bad_one(addon, bl):
     b = sphere_with_seams(32, 16, name='B')
     b.location.x = 3
     a.select_set(True)
-    bpy.ops.uv.conformal_flatten(boundary='AREA', shared_layout=True, pack_shape='AABB')
+    bpy.ops.uv.conformal_flatten(boundary='AREA', shared_layout=True)
     Wa, Wb = loop_uv(a.data), loop_uv(b.data)
     _, _, ta, ia, _ = islands_of(a.data)
     _, _, tb, ib, _ = islands_of(b.data)
@@ -620,3 +620,26 @@ def test_operator_properties(addon):
     assert props['cut_holes'].default is False and props['skip_bad_islands'].default is False
     assert props['packer'].default == 'BLENDER'
     assert {i.identifier for i in props['pack_shape'].enum_items} == {'CONCAVE', 'CONVEX', 'AABB'}
+    assert props['pack_shape'].default == 'AABB'          # as Blender's Unwrap packs
+
+
+def test_redo_panel_draws_every_option(addon):
+    """``draw`` of the redo panel (UILayout cannot be created headless: a stand-in records the calls)."""
+    from conformal_flatten.addon.ops_flatten import UV_OT_conformal_flatten
+    drawn = []
+
+    class Layout:
+        use_property_split = False
+        active = True
+
+        def column(self, **k):
+            return Layout()
+        row = column
+
+        def prop(self, data, name, **k):
+            drawn.append(name)
+    props = bpy.ops.uv.conformal_flatten.get_rna_type().properties
+    names = [p.identifier for p in props if p.identifier != 'rna_type']
+    fake = types.SimpleNamespace(layout=Layout(), **{n: props[n].default for n in names})
+    UV_OT_conformal_flatten.draw(fake, bpy.context)
+    assert sorted(drawn) == sorted(names)
