@@ -46,9 +46,12 @@ def error(xi_true, xi, weights):
 
 def demo(sources=6, sensors=6, n=65, fine=129, cells=DEFAULT_CELLS, fine_cells=4 * DEFAULT_CELLS,
          boundary='uniform', control=DEFAULT_CONTROL, smoothness=DEFAULT_SMOOTHNESS,
-         curvature=DEFAULT_CURVATURE, add_noise=0.0, noise=None, seed=0, data=None):
+         curvature=DEFAULT_CURVATURE, add_noise=0.0, noise=None, seed=0, data=None,
+         surface='bump', metric=None, metric_text=None):
     """Run the experiment once; returns a dict of results (errors are dimensionless, seconds wall
-    time). ``add_noise``: relative Gaussian noise added to the synthetic times (seeded by ``seed``);
+    time). ``surface``: a ``core.surfaces`` name; ``metric``: callable (k,3) points -> (k,) positive
+    metric (default ``true_metric``), described by ``metric_text``. ``add_noise``: relative Gaussian
+    noise added to the synthetic times (seeded by ``seed``);
     ``noise``: the noise level the recovery assumes (default: the larger of ``DEFAULT_NOISE`` and
     ``add_noise``). ``data`` caches the meshes and flattenings between runs."""
     if sources < 1 or sensors < 1:
@@ -58,10 +61,11 @@ def demo(sources=6, sensors=6, n=65, fine=129, cells=DEFAULT_CELLS, fine_cells=4
                              f"mesh ({n})")
     t0 = time.perf_counter()
     data = {} if data is None else data
-    key = (n, fine, boundary)
+    metric = metric or true_metric
+    key = (surface, n, fine, boundary)
     if key not in data:
-        V, F = make_surface('bump', n)
-        Vf, Ff = make_surface('bump', fine)
+        V, F = make_surface(surface, n)
+        Vf, Ff = make_surface(surface, fine)
         data[key] = (V, F, flatten(V, F, boundary=boundary, fit='true_scale', bound=False),
                      Vf, Ff, flatten(Vf, Ff, boundary=boundary, fit='true_scale', bound=False))
     V, F, flat, Vf, Ff, flat_f = data[key]
@@ -74,7 +78,7 @@ def demo(sources=6, sensors=6, n=65, fine=129, cells=DEFAULT_CELLS, fine_cells=4
     src_f, sns_f = near(src), near(sns)
     Sf, Tf = (a.ravel() for a in np.meshgrid(src_f, sns_f, indexing='ij'))
     t1 = time.perf_counter()
-    times = simulate_times(Vf, Ff, true_metric(Vf), Sf, Tf, cells=fine_cells, flat=flat_f)
+    times = simulate_times(Vf, Ff, metric(Vf), Sf, Tf, cells=fine_cells, flat=flat_f)
     if add_noise > 0:
         times = times * (1 + add_noise * np.random.default_rng(seed).standard_normal(len(times)))
         times = np.maximum(times, 0.0)
@@ -84,14 +88,14 @@ def demo(sources=6, sensors=6, n=65, fine=129, cells=DEFAULT_CELLS, fine_cells=4
     res = reconstruct(V, F, S, T, times, cells=cells, control=control, noise=noise,
                       smoothness=smoothness, curvature=curvature, flat=flat)
     t3 = time.perf_counter()
-    xt = true_metric(V)
+    xt = metric(V)
     wa = vertex_areas(V, F)
     err = error(xt, res.xi, wa)
     const = res.report['constant_fit']
     err_c = error(xt, np.full(len(V), const), wa)
     r = res.report
     return {
-        'surface': 'bump', 'true_metric': TRUE_METRIC_TEXT, 'boundary': boundary,
+        'surface': surface, 'true_metric': metric_text or TRUE_METRIC_TEXT, 'boundary': boundary,
         'sources': int(sources), 'sensors': int(sensors), 'measurements': int(len(times)),
         'mean_relative_error': err,
         'max_relative_error': float(np.max(np.abs(xt - res.xi) / xt)),

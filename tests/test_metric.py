@@ -240,3 +240,19 @@ def test_sweep_solver_agrees_with_fast_marching(flat17):
         b = metric.sample(metric.march(grid, w, flat.uv[s], 'sweep')[0], idx, wts)
         far = np.linalg.norm(V - V[s], axis=1) > 0.5
         assert np.abs(a[far] / b[far] - 1).max() < 0.01
+
+
+def test_simulate_times_match_exact_geodesics():
+    """The forward model: constant metric 2 on the paper's surface, sources at a corner, the centre
+    and an edge midpoint, times to every vertex against 2 x the exact polyhedral distance (MMP)."""
+    V, F = make_surface('bump', 65)
+    ref = np.load(os.path.join(DATA, 'geodesic_ref_bump_65.npz'))
+    k, T = np.meshgrid(np.arange(len(ref['sources'])), np.arange(0, len(V), 7), indexing='ij')
+    k, T = k.ravel(), T.ravel()
+    S = ref['sources'][k]
+    t = metric.simulate_times(V, F, np.full(len(V), 2.0), S, T, cells=96)
+    d = 2.0 * ref['dist'][k, T].astype(np.float64)
+    far = d > 0.4
+    assert np.all(np.isfinite(t))
+    assert np.abs(t[far] / d[far] - 1).max() < 0.01
+    assert abs(np.mean(t[far] / d[far] - 1)) < 0.002
