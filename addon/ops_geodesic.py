@@ -237,7 +237,7 @@ class MESH_OT_conformal_geodesic_distance(bpy.types.Operator):
     bl_label = "Geodesic Distance"
     bl_options = {'REGISTER', 'UNDO'}
 
-    grid: IntProperty(name="Grid Size", default=0, min=0, max=8192,
+    grid: IntProperty(name="Grid Size", default=0, min=0, max=4096,
                       description="Grid nodes along the longer side of the flattened domain (0: the "
                                   "add-on preference, or automatic from the mesh resolution)")
     source: EnumProperty(name="Source", items=SOURCE_ITEMS, default='AUTO',
@@ -266,7 +266,7 @@ class MESH_OT_conformal_geodesic_distance(bpy.types.Operator):
 
 
 class ConformalGeodesicSettings(bpy.types.PropertyGroup):
-    grid: IntProperty(name="Grid Size", default=0, min=0, max=8192,
+    grid: IntProperty(name="Grid Size", default=0, min=0, max=4096,
                       description="Grid nodes along the longer side (0: preference or automatic)")
     source: EnumProperty(name="Source", items=SOURCE_ITEMS, default='AUTO')
     bands: IntProperty(name="Iso-line Bands", default=10, min=0, max=200)

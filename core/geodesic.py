@@ -6,19 +6,22 @@ element is ``ds = |dx_uv| / mu`` and the geodesic distance ``T`` solves the eiko
 
 Steps of ``geodesic_distance``:
 
-1. Flatten (``core.flatten``) unless a UV map is given; compute the realised per-triangle ``mu`` from the
-   map itself, so any UV scale works; average it to the vertices (area-weighted, in log) and rasterise it
+1. Flatten (``core.flatten``) unless a UV map is given. Rotate the map to its smallest bounding
+   rectangle (``align_uv``). Compute the realised per-triangle ``mu = sqrt(A_uv / A_3d)`` from the map
+   itself, so any UV scale works, average it to the vertices (area-weighted, in log) and rasterise it
    with linear interpolation onto a regular grid over the UV bounding box. Nodes outside the domain are
-   masked, except a one-node rim that carries extrapolated ``mu`` so that boundary vertices can be sampled.
-2. Seed each source with exact times in a small disk: inside ``T = |x - s| / mu_mid``, with ``mu_mid``
-   the grid ``mu`` at the midpoint of the segment (the flat chart at the source; second order in the
-   disk radius). The zero contour of ``phi`` is the metric circle ``T = tau`` around the sources, and
-   fast marching continues from it, so the point-source offset of fast marching (about 0.3 cells,
-   scikit-fmm issue #22) does not arise.
+   masked, except a one-node rim with extrapolated ``mu`` so that boundary vertices can be sampled.
+2. Seed each source with exact times in a disk of ``SEED_RADIUS`` cells (smaller where ``mu`` varies
+   fast, ``seed_radius``): ``T = |x - s| * mean(1/mu)`` along the straight segment (Simpson), the flat
+   chart at the source. The seed's rim is the metric circle ``T = tau``; ``calibrate_phi`` sets the
+   level-set values there so that scikit-fmm's first front values are exact. Fast marching then
+   continues from exact data: the point-source offset of fast marching (about 0.3 cells, scikit-fmm
+   issue #22) and the first-order error of its contour start do not arise.
 3. March with scikit-fmm ``travel_time(order=2)`` or, when scikit-fmm is missing, the pure-numpy second
-   order fast sweeping solver of ``core.eikonal``.
-4. Sample the travel time back to the vertices bilinearly; vertices inside a seed disk take the exact
-   local time.
+   order fast sweeping solver of ``core.eikonal`` (the seed and its ring held fixed). Sources whose
+   ``mu`` differ by more than a factor 2 march separately and the minimum is taken.
+4. Sample the travel time back to the vertices bilinearly; vertices inside a seed disk take their chart
+   time directly.
 """
 import time
 
@@ -29,7 +32,7 @@ from .geometry import face_areas
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
 MU_MODES = ('vertex', 'face')
-GRID_MIN, GRID_MAX = 64, 8192
+GRID_MIN, GRID_MAX = 64, 4096
 RIM = 1
 # default seed disk radius in cells: the sweep's second-order stencil is less accurate on strongly
 # curved fronts than fast marching's, so it starts from a larger exact disk (see docs/geodesic.md)
@@ -123,7 +126,7 @@ class Grid:
         cnt = np.where(ok, np.maximum(j1 - j0 + 1, 0), 0)
         k = np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt)
         idx = np.repeat(row * nx + j0, cnt) + k
-        face = np.full(ny * nx, -1, np.int64)
+        face = np.full(ny * nx, -1, np.int32)
         face[idx] = np.repeat(t, cnt)
         self.face = face.reshape(ny, nx)
         self.inside = self.face >= 0
@@ -172,13 +175,15 @@ class Grid:
         return out
 
 
-def align_uv(uv):
+def align_uv(uv, used=None):
     """Rotate a UV map (n,2) to its minimum-area bounding rectangle (the rotation is a similarity,
     so distances do not change): the grid then covers the domain tightly and straight boundary
-    runs lie along grid axes, where fast marching is most accurate. Returns the rotated (n,2)."""
+    runs lie along grid axes, where fast marching is most accurate. ``used`` (n,) bool: the vertices
+    that count (default all). Returns the rotated (n,2)."""
     from scipy.spatial import ConvexHull, QhullError
     try:
-        H = uv[ConvexHull(uv).vertices]
+        pts = uv if used is None else uv[used]
+        H = pts[ConvexHull(pts).vertices]
     except (QhullError, ValueError):
         return uv
     E = np.roll(H, -1, axis=0) - H
@@ -220,7 +225,7 @@ def default_grid(V, F, uv):
     rounded up to a multiple of 64 and clipped to 256..2048."""
     E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     le = np.linalg.norm(uv[E[:, 0]] - uv[E[:, 1]], axis=1).mean()
-    ext = (uv.max(0) - uv.min(0)).max()
+    ext = np.ptp(uv[np.unique(F)], axis=0).max()
     g = 8.0 * ext / max(le, 1e-300)
     return int(np.clip(64 * np.ceil(g / 64), 256, 2048))
 
@@ -256,8 +261,9 @@ def _source_points(V, F, uv, sources, points):
     return np.concatenate(pos)
 
 
-def _local_times(grid, mu_grid, valid, S, radius_nodes, pts=None):
-    """Exact flat-chart times from the sources ``S`` (k,2, node coordinates). With ``pts`` None:
+def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None):
+    """Flat-chart times (``_chart_time``, ``inv_mu`` the grid field 1/mu) from the sources ``S`` (k,2,
+    node coordinates). With ``pts`` None:
     on the grid, over a window of ``radius_nodes + 2`` around each source, returns (ny, nx) with inf
     outside the windows. With ``pts`` (q,2 node coordinates): at those points (q,), from the nearest
     source in node units only (others inf)."""
@@ -281,7 +287,7 @@ def _local_times(grid, mu_grid, valid, S, radius_nodes, pts=None):
             keep = valid[ii, jj]
             ii, jj, src = ii[keep], jj[keep], src[keep]
             P = np.stack([jj, ii], 1).astype(np.float64)
-            np.minimum.at(out, (ii, jj), _chart_time(mu_grid, valid, Sb[src], P, h))
+            np.minimum.at(out, (ii, jj), _chart_time(inv_mu, valid, Sb[src], P, h))
         return out
     # at arbitrary points: nearest sources by a KD-tree
     from scipy.spatial import cKDTree
@@ -289,16 +295,16 @@ def _local_times(grid, mu_grid, valid, S, radius_nodes, pts=None):
     T = np.full(len(pts), np.inf)
     near = d <= radius_nodes + 1
     if near.any():
-        T[near] = _chart_time(mu_grid, valid, S[k[near]], pts[near], h)
+        T[near] = _chart_time(inv_mu, valid, S[k[near]], pts[near], h)
     return T
 
 
-def _chart_time(mu_grid, valid, S, P, h):
-    """Flat-chart time from ``S`` (k,2) to ``P`` (k,2) (node coordinates): ``|P - S| h / mu`` with
-    ``mu`` the mean of the grid ``mu`` at the two ends and the midpoint (Simpson on 1/mu)."""
+def _chart_time(inv_mu, valid, S, P, h):
+    """Flat-chart time from ``S`` (k,2) to ``P`` (k,2) (node coordinates): ``|P - S| h`` times the
+    mean of ``1/mu`` along the segment (Simpson's rule on the grid field ``inv_mu`` = 1/mu)."""
     d = np.linalg.norm(P - S, axis=1) * h
-    inv = (bilinear(1.0 / mu_grid, S, valid) + 4 * bilinear(1.0 / mu_grid, 0.5 * (S + P), valid)
-           + bilinear(1.0 / mu_grid, P, valid)) / 6.0
+    inv = (bilinear(inv_mu, S, valid) + 4 * bilinear(inv_mu, 0.5 * (S + P), valid)
+           + bilinear(inv_mu, P, valid)) / 6.0
     return d * inv
 
 
@@ -470,12 +476,14 @@ def geodesic_distance(V, F, sources=None, points=None, uv=None, boundary='unifor
         report['boundary'] = 'given'
     say(0.3, 'rasterising')
     t = time.perf_counter()
-    uv = align_uv(uv)
+    on_mesh = np.zeros(len(V), bool)
+    on_mesh[F.ravel()] = True
+    uv = align_uv(uv, on_mesh)
     S_uv = _source_points(V, F, uv, sources, points)
     mu_f = face_mu(V, F, uv)
     if grid is None:
         grid = default_grid(V, F, uv)
-    G = Grid(uv, grid).rasterise(uv, F)
+    G = Grid(uv[on_mesh], grid).rasterise(uv, F)
     valid = G.rim(RIM)
     if mu_mode == 'vertex':
         mu = G.interpolate(uv, F, vertex_mu(V, F, mu_f))
@@ -489,6 +497,7 @@ def geodesic_distance(V, F, sources=None, points=None, uv=None, boundary='unifor
     if not np.isfinite(mu_s).all():
         raise ConformalError("a source lies outside the flattened domain")
     radius = seed_radius(mu, valid, G.h, source_radius)
+    inv_mu = 1.0 / mu
     P = G.coords(uv)
     T = np.full(G.shape, np.inf)
     near = np.full(len(V), np.inf)
@@ -499,7 +508,7 @@ def geodesic_distance(V, F, sources=None, points=None, uv=None, boundary='unifor
         # exact chart times in the seed disk T < tau (radius >= `radius` cells for every source)
         tau = radius * G.h / float(mu_s[idx].min())
         reach = radius * float(mu_s[idx].max() / mu_s[idx].min())
-        Tloc = _local_times(G, mu, valid, S[idx], reach)
+        Tloc = _local_times(G, inv_mu, valid, S[idx], reach)
         # signed distance to the seed rim, in UV units at each node's own speed
         h_far = 4.0 * G.h
         phi = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * mu, h_far)
@@ -513,15 +522,13 @@ def geodesic_distance(V, F, sources=None, points=None, uv=None, boundary='unifor
         Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else Tm
         np.minimum(T, Tg, out=T)
         # vertices inside a seed disk take their exact chart time
-        nv = _local_times(G, mu, valid, S[idx], reach + 2, pts=P)
+        nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=P)
         near = np.where(nv <= tau, np.fmin(near, nv), near)
     T[~valid] = np.inf
     seconds['solve'] = time.perf_counter() - t
     t = time.perf_counter()
     dist = bilinear(np.where(valid, T, np.nan), P, valid)
     dist = np.fmin(dist, near)
-    on_mesh = np.zeros(len(V), bool)
-    on_mesh[F.ravel()] = True
     dist[~on_mesh] = np.nan
     bad = int((~np.isfinite(dist[on_mesh])).sum())
     if bad:

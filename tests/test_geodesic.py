@@ -275,3 +275,14 @@ def test_cli_writes_one_distance_per_vertex(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith('error:') and 'out of range' in err and 'Traceback' not in err
     assert not bad.exists()
+
+
+def test_loose_vertex_gets_nan_and_does_not_shift_the_grid(flat):
+    V, F, uv = flat
+    V2 = np.vstack([V, [[50.0, 50.0, 0.0]]])
+    uv2 = np.vstack([uv, [[1e3, -1e3]]])
+    d, rep = geo.geodesic_distance(V2, F, [2112], uv=uv2, grid=512)
+    assert np.isnan(d[-1])
+    d0, rep0 = geo.geodesic_distance(V, F, [2112], uv=uv, grid=512)
+    assert rep['grid'] == rep0['grid']
+    np.testing.assert_allclose(d[:-1], d0, rtol=1e-12, atol=1e-12)
