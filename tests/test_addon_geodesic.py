@@ -177,3 +177,22 @@ def test_failure_leaves_the_mesh_untouched(addon, bl):
     with pytest.raises(RuntimeError, match='no vertex'):
         bpy.ops.mesh.conformal_geodesic_distance(grid=256, source='SELECTED')
     bl.assert_same(before, bl.mesh_snapshot(obj2.data))
+
+
+def test_panel_draws_button_and_report(addon, bl):
+    from test_addon import FakeLayout
+    obj, V, F = bump_object(bl)
+    panel = bpy.types.VIEW3D_PT_conformal_geodesic
+    assert panel.bl_category == 'Conformal'
+    log = []
+    fake = type('P', (), {'layout': FakeLayout(log)})()
+    panel.draw(fake, bpy.context)
+    assert ('operator', 'mesh.conformal_geodesic_distance') in log
+    assert ('prop', 'source') in log and ('prop', 'grid') in log and ('prop', 'bands') in log
+    bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA')
+    log.clear()
+    panel.draw(fake, bpy.context)
+    labels = [t for kind, t in log if kind == 'label']
+    assert "Max distance" in labels and "Solver" in labels and "skfmm" in labels
+    from conformal_flatten.addon import ui
+    assert ui.geodesic_solver_label() == 'scikit-fmm'
