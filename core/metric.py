@@ -19,8 +19,11 @@ expected relative error of the times, so more measurements weigh more against th
 Dirichlet term is the paper's smoothness term; the Dirichlet integral is invariant under conformal
 maps, so computed in the plane it equals the one on the surface. The thin-plate term leaves affine
 ``g`` free and keeps the field from inventing bumps to fit the discretisation error of the times; a
-constant metric costs nothing in either. The Jacobian of each travel time with respect to the grid
-weights comes from the adjoint of the linearised upwind eikonal update (the adjoint state method): the solution of the transposed,
+constant metric costs nothing in either. Both act on ``log xi`` rather than ``xi`` (the paper's
+``|grad xi|^2``), which makes them independent of the metric's units.
+
+The Jacobian of each travel time with respect to the grid weights comes from the adjoint of the
+linearised upwind eikonal update (the adjoint state method): the solution of the transposed,
 triangular system is the discrete geodesic path density, i.e. the length of the path through each
 cell, as in back-tracing ``grad T``. The least-squares problem is solved by a trust-region
 Gauss-Newton method (``scipy.optimize.least_squares``).
@@ -29,6 +32,7 @@ Units: ``uv`` and ``h`` are in UV units, ``mu`` in UV units per surface unit, ti
 units times the metric.
 """
 import math
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -671,5 +675,4 @@ def read_times(path, n):
             lines = fh.read().splitlines()
     except OSError as exc:
         raise ConformalError(f"cannot read {path}: {exc.strerror}") from None
-    import os
     return parse_times(lines, n, name=os.path.basename(path))
