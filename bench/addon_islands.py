@@ -1,8 +1,9 @@
-"""Cost of islands in the add-on (issue 7): the operator on seamed meshes with each packer, headless
-in the bpy module. Prints a markdown table: mesh, triangles, islands, packer, flatten s (core),
+"""Islands in the add-on (issue 7), headless in the bpy module. Prints two markdown tables: the
+acceptance cases (seamed UV spheres, Suzanne, two holes) through the operator with default options,
+then the cost of each packer on seamed meshes: mesh, triangles, islands, packer, flatten s (core),
 write+pack s, total s, flips, worst island qc_mean.
 
-    .venv/bin/python bench/addon_islands.py [--quick]
+    .venv/bin/python bench/addon_islands.py [--quick | --acceptance]
 
 Wall-clock on whatever machine runs it (noisy on a shared machine)."""
 import argparse
@@ -65,13 +66,65 @@ def grid_islands(bpy, n, k):
     return obj, f"bump grid {n}x{n} quads, {k}x{k} islands by seams"
 
 
+def monkey(bpy, seams):
+    bpy.ops.mesh.primitive_monkey_add()
+    obj = bpy.context.object
+    if seams:
+        mark_seams(obj.data, lambda a, b: (np.abs(a[:, 0]) < 1e-5) & (np.abs(b[:, 0]) < 1e-5))
+    return obj, "Suzanne (monkey)" + (", seams on the symmetry plane" if seams else ", no seams")
+
+
+def two_holes(bpy):
+    from core.surfaces import make_surface
+    V, F = make_surface('bump', 33)
+    inside = ((np.abs(V[:, 0] + 0.9) < 0.4) & (np.abs(V[:, 1]) < 0.4)) | \
+             (np.hypot(V[:, 0] - 0.9, V[:, 1] - 0.3) < 0.5)
+    F = F[~inside[F].any(1)]
+    used = np.unique(F)
+    remap = np.full(len(V), -1)
+    remap[used] = np.arange(len(used))
+    me = bpy.data.meshes.new('holes')
+    me.from_pydata(V[used].tolist(), [], remap[F].tolist())
+    obj = bpy.data.objects.new('holes', me)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    return obj, "bump 33x33 with two holes"
+
+
+def acceptance(bpy, pkg):
+    """The issue's acceptance cases through the operator (uniform boundary, default options)."""
+    print("| case | triangles | islands | holes filled | flips | qc_mean per island | mu_ratio (all "
+          "islands) | total s |")
+    print("|---|---|---|---|---|---|---|---|")
+    cases = [lambda: sphere(bpy, 32, 16), lambda: sphere(bpy, 48, 24), lambda: monkey(bpy, False),
+             lambda: monkey(bpy, True), lambda: two_holes(bpy)]
+    for make in cases:
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        pkg.register()
+        obj, label = make()
+        t = time.perf_counter()
+        bpy.ops.uv.conformal_flatten(boundary='UNIFORM')
+        total = time.perf_counter() - t
+        r = json.loads(obj.data['conformal_flatten_report'])
+        qc = ', '.join(f"{i['qc_mean']:.4f}" for i in r['island_reports'])
+        print(f"| {label} | {r['triangles']:,} | {r['islands']} | {r['holes_filled']} | {r['flips']} | "
+              f"{qc} | {r['mu_ratio']:.3g} | {total:.2f} |", flush=True)
+        pkg.unregister()
+    print()
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument('--quick', action='store_true', help='small meshes only')
+    ap.add_argument('--acceptance', action='store_true', help='only the acceptance table')
     args = ap.parse_args()
     import bpy
     from tools import devpkg
     pkg = devpkg.load()
+    acceptance(bpy, pkg)
+    if args.acceptance:
+        return
     cases = [lambda: sphere(bpy, 64, 32), lambda: grid_islands(bpy, 64, 4)]
     if not args.quick:
         cases += [lambda: sphere(bpy, 256, 128), lambda: grid_islands(bpy, 200, 8)]

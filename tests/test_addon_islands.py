@@ -643,3 +643,25 @@ def test_redo_panel_draws_every_option(addon):
     fake = types.SimpleNamespace(layout=Layout(), **{n: props[n].default for n in names})
     UV_OT_conformal_flatten.draw(fake, bpy.context)
     assert sorted(drawn) == sorted(names)
+
+
+def test_loose_edge_refused_on_whole_mesh_only(addon, bl):
+    """A loose edge (in no face) is bad input for a whole-mesh run (ERROR, data unchanged); an Edit-mode
+    face selection ignores it."""
+    from conformal_flatten.core.surfaces import make_surface
+    V, F = make_surface('bump', 9)
+    me = bpy.data.meshes.new('loose')
+    n = len(V)
+    me.from_pydata(np.vstack([V, [[3, 3, 0], [4, 3, 0]]]).tolist(), [(n, n + 1), (0, 10)], F.tolist())
+    obj = bpy.data.objects.new('loose', me)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    before = bl.mesh_snapshot(me)
+    with pytest.raises(RuntimeError, match='loose'):
+        bpy.ops.uv.conformal_flatten(boundary='AREA')
+    bl.assert_same(before, bl.mesh_snapshot(me))
+    _select_faces(obj, np.ones(len(F), bool) & (V[F].mean(1)[:, 0] < 0))
+    assert bpy.ops.uv.conformal_flatten(boundary='AREA') == {'FINISHED'}
+    bpy.ops.object.mode_set(mode='OBJECT')
+    assert report_of(me)['selection'] == 'selected faces'
