@@ -172,9 +172,11 @@ def target_objects(context):
     return [(objs[0], [o.name for o in objs]) for objs in by_mesh.values()]
 
 
-def _enter_mode(context, objs, mode):
-    """Put exactly ``objs`` (all in Object mode) into ``mode``; the selection and the active object
-    are changed for the switch and put back."""
+@contextmanager
+def _selected_only(context, objs):
+    """For the body, exactly ``objs`` are selected and ``objs[0]`` is active (mode switches and UV
+    operators act on the selected/active objects); the selection and the active object are put back
+    afterwards."""
     view_layer = context.view_layer
     active = view_layer.objects.active
     selected = [o for o in view_layer.objects if o.select_get()]
@@ -184,13 +186,31 @@ def _enter_mode(context, objs, mode):
         for o in objs:
             o.select_set(True)
         view_layer.objects.active = objs[0]
-        bpy.ops.object.mode_set(mode=mode)
+        yield
     finally:
         for o in objs:
             o.select_set(False)
         for o in selected:
             o.select_set(True)
         view_layer.objects.active = active
+
+
+def _enter_mode(context, objs, mode):
+    """Put exactly ``objs`` (all in Object mode) into ``mode``."""
+    with _selected_only(context, objs):
+        bpy.ops.object.mode_set(mode=mode)
+
+
+@contextmanager
+def _in_edit_mode(context, objs):
+    """For the body, exactly ``objs`` are in Edit mode, selected, ``objs[0]`` active; back to Object
+    mode afterwards."""
+    with _selected_only(context, objs):
+        bpy.ops.object.mode_set(mode='EDIT')
+        try:
+            yield
+        finally:
+            bpy.ops.object.mode_set(mode='OBJECT')
 
 
 @contextmanager
@@ -407,15 +427,13 @@ def _pack_with_blender(context, objs, faces, opts):
         for o, f in zip(objs, faces):
             meshio.select_faces_only(o.data, f)
         tool.use_uv_select_sync = True
-        try:
-            _enter_mode(context, objs, 'EDIT')
-            bpy.ops.uv.pack_islands(udim_source='CLOSEST_UDIM', rotate=opts.pack_rotate,
-                                    rotate_method='ANY', scale=True, merge_overlap=False,
-                                    margin_method='SCALED', margin=opts.margin, pin=False,
-                                    shape_method=opts.pack_shape)
-        finally:
-            if any(o.mode != 'OBJECT' for o in objs):
-                _enter_mode(context, objs, 'OBJECT')
+        with _in_edit_mode(context, objs):
+            ret = bpy.ops.uv.pack_islands(udim_source='CLOSEST_UDIM', rotate=opts.pack_rotate,
+                                          rotate_method='ANY', scale=True, merge_overlap=False,
+                                          margin_method='SCALED', margin=opts.margin, pin=False,
+                                          shape_method=opts.pack_shape)
+        if ret != {'FINISHED'}:
+            error = f"it returned {', '.join(sorted(ret))}"
     except (RuntimeError, TypeError) as exc:
         error = str(exc).strip()
     finally:
@@ -939,6 +957,37 @@ class UV_OT_conformal_flatten(bpy.types.Operator):
         return self._done(reports)
 
 
+def _holes_text(r):
+    if r.get('holes_filled'):
+        return f"{r['holes_filled']} filled"
+    if r.get('holes_cut'):
+        return f"{r['holes_cut']} cut open"
+    return "none"
+
+
+ISLAND_ROWS = [
+    ("Islands", lambda r: f"{r['islands']}" + (f" ({r['islands_failed']} skipped)"
+                                               if r.get('islands_failed') else "")),
+    ("Holes", _holes_text),
+    ("Faces", lambda r: "selected" if r.get('selection') == 'selected faces' else "all"),
+    ("Packing", lambda r: {'pack_islands': "Pack Islands", 'shelf': "shelf",
+                           'none': "none (one disk)"}.get(r.get('packer'), "-")),
+    ("Objects", lambda r: str(len(r.get('objects') or [r.get('object')]))),
+]
+
+
+def draw_islands_section(layout, context):
+    """Sidebar section (``ui.add_section``): islands, holes and packing of the active mesh's last
+    flatten."""
+    from .ui import draw_report
+    obj = getattr(context, 'active_object', None)
+    report = meshio.load_report(obj.data, REPORT_KEY) if obj is not None and obj.type == 'MESH' else None
+    if report is None or 'islands' not in report:
+        layout.label(text="Seams split the mesh into islands")
+        return
+    draw_report(layout, report, ISLAND_ROWS)
+
+
 def menu_unwrap(self, context):
     self.layout.separator()
     self.layout.operator(UV_OT_conformal_flatten.bl_idname, text="Conformal Flatten (Uniform)")
@@ -948,12 +997,16 @@ CLASSES = (UV_OT_conformal_flatten,)
 
 
 def register():
+    from . import ui             # not at module level: ui imports this module
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     bpy.types.IMAGE_MT_uvs_unwrap.append(menu_unwrap)
+    ui.add_section("Islands", draw_islands_section)
 
 
 def unregister():
+    from . import ui
+    ui.remove_section(draw_islands_section)
     bpy.types.IMAGE_MT_uvs_unwrap.remove(menu_unwrap)
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

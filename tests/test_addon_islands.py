@@ -377,6 +377,7 @@ def test_edit_mode_selection_leaves_other_uvs_bitwise(addon, bl, packer):
     rep = report_of(me)
     assert rep['selection'] == 'selected faces' and rep['flattened_polygons'] == int(faces.sum())
     assert rep['islands'] == 2 and rep['flips'] == 0
+    assert rep['packer'] == {'BLENDER': 'pack_islands', 'SHELF': 'shelf'}[packer]
     check_islands_layout(me, faces=faces, qc_max=1.05)
 
 
@@ -448,6 +449,7 @@ def test_several_objects_and_linked_duplicate(addon, bl):
         ops_flatten.compute_job = real
     assert sorted(calls) == ['Ball', 'Grid']                  # the shared mesh once
     assert report_of(sphere.data)['objects'] == ['Ball', dup.name]
+    assert report_of(sphere.data)['packer'] == 'pack_islands'     # with another object active
     assert report_of(grid.data)['islands'] == 1
     check_islands_layout(sphere.data)
     assert {o.name for o in bpy.context.selected_objects} == {'Grid', 'Ball', dup.name}
@@ -462,6 +464,7 @@ def test_several_objects_shared_layout_and_bad_one(addon, bl):
     b.location.x = 3
     a.select_set(True)
     bpy.ops.uv.conformal_flatten(boundary='AREA', shared_layout=True)
+    assert report_of(a.data)['packer'] == report_of(b.data)['packer'] == 'pack_islands'
     Wa, Wb = loop_uv(a.data), loop_uv(b.data)
     _, _, ta, ia, _ = islands_of(a.data)
     _, _, tb, ib, _ = islands_of(b.data)
@@ -482,7 +485,8 @@ def test_several_objects_shared_layout_and_bad_one(addon, bl):
     assert c.mode == 'OBJECT'
 
 
-def test_multi_object_edit_mode(addon, bl):
+@pytest.mark.parametrize('packer', ['BLENDER', 'SHELF'])
+def test_multi_object_edit_mode(addon, bl, packer):
     """Two objects in Edit mode, each with its own face selection: both flattened, both stay in Edit
     mode."""
     a = sphere_with_seams(32, 16, name='A')
@@ -493,11 +497,13 @@ def test_multi_object_edit_mode(addon, bl):
     bpy.ops.object.mode_set(mode='EDIT')
     assert a.mode == b.mode == 'EDIT'
     bpy.ops.mesh.select_all(action='SELECT')
-    bpy.ops.uv.conformal_flatten(boundary='AREA', packer='SHELF')
+    bpy.ops.uv.conformal_flatten(boundary='AREA', packer=packer)
     assert a.mode == b.mode == 'EDIT'
+    assert bpy.context.view_layer.objects.active == a
     bpy.ops.object.mode_set(mode='OBJECT')
     for o in (a, b):
         assert report_of(o.data)['islands'] == 2
+        assert report_of(o.data)['packer'] == {'BLENDER': 'pack_islands', 'SHELF': 'shelf'}[packer]
         check_islands_layout(o.data)
 
 
@@ -509,13 +515,9 @@ def test_pack_islands_failure_falls_back_to_shelf(addon, bl, monkeypatch):
     bpy.ops.object.mode_set(mode='EDIT')
     bpy.ops.object.mode_set(mode='OBJECT')
     sel_before = _selection_attrs(me)
-    real = ops_flatten._enter_mode
-
-    def broken(context, objs, mode):
-        if mode == 'EDIT':
-            raise RuntimeError("Error: simulated poll failure")
-        return real(context, objs, mode)
-    monkeypatch.setattr(ops_flatten, '_enter_mode', broken)
+    def broken(context, objs):
+        raise RuntimeError("Error: simulated poll failure")
+    monkeypatch.setattr(ops_flatten, '_in_edit_mode', broken)
     assert bpy.ops.uv.conformal_flatten(boundary='AREA') == {'FINISHED'}
     rep = report_of(me)
     assert rep['packer'] == 'shelf' and 'simulated poll failure' in rep['pack_note']
@@ -665,3 +667,25 @@ def test_loose_edge_refused_on_whole_mesh_only(addon, bl):
     assert bpy.ops.uv.conformal_flatten(boundary='AREA') == {'FINISHED'}
     bpy.ops.object.mode_set(mode='OBJECT')
     assert report_of(me)['selection'] == 'selected faces'
+
+
+def test_sidebar_islands_section(addon, bl):
+    from conformal_flatten.addon import ops_flatten, ui
+    assert any(d is ops_flatten.draw_islands_section for _, d in ui._sections)
+    labels = []
+
+    class Layout:
+        def column(self, **k):
+            return self
+        row = column
+
+        def label(self, text='', **k):
+            labels.append(text)
+    bpy.ops.mesh.primitive_monkey_add()
+    ops_flatten.draw_islands_section(Layout(), bpy.context)
+    assert labels == ["Seams split the mesh into islands"]
+    bpy.ops.uv.conformal_flatten(boundary='AREA', packer='SHELF')
+    labels.clear()
+    ops_flatten.draw_islands_section(Layout(), bpy.context)
+    assert labels == ["Islands", "3", "Holes", "1 filled", "Faces", "all", "Packing", "shelf",
+                      "Objects", "1"]
