@@ -58,6 +58,8 @@ def grid_islands(bpy, n, k):
     h = 2.0 / n
 
     def on_cut(c):
+        if not len(cuts):
+            return np.zeros(len(c), bool)
         return np.abs(c[:, None] - cuts[None, :]).min(1) < 0.25 * h
 
     def pred(a, b):
