@@ -29,7 +29,7 @@ from .validate import check_mesh, normalise_scale, DEFAULT_MAX_FACES
 
 BOUNDARY_MODES = ('free', 'area', 'uniform')
 FIT_MODES = ('true_scale', 'unit_square')
-AUTO_BOUND_FACES = 60_000      # above this the certified bound is computed only on request
+AUTO_BOUND_FACES = 20_000      # above this the certified bound is computed only on request
 
 
 @dataclass

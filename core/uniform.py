@@ -77,28 +77,33 @@ def _minmax_lp(s, J, c, delta, reg_w):
     return c + d, res.x[-2] - res.x[-1]
 
 
-def _model_lp(s, JF, c, delta, reg_w, active, max_rounds=5):
-    """Minimise the spread of the linear model ``s + JF (a - c)`` over all faces by an active set of
-    rows: start from the ``active`` lowest and highest faces, add the faces the model says exceed the
-    current bounds. Returns (a, predicted spread) or (None, None)."""
+def _model_lp(s, JF, c, delta, reg_w, active=200, max_rounds=6, max_add=1000):
+    """Minimise the spread of the linear model ``s + JF (a - c)`` over all faces, inside the box
+    ``|a - c| <= delta``, by an active set of rows: start from the ``active`` lowest and highest
+    faces and add the faces the model says exceed the current bounds (at most ``max_add`` a round,
+    worst first). Returns the best (a, model spread over all faces) seen, or (None, None)."""
     order = np.argsort(s)
     k = min(active, len(s))
     rows = np.unique(np.r_[order[:k], order[-k:]])
+    best = (None, None)
     for _ in range(max_rounds):
-        a, predicted = _minmax_lp(s[rows], JF[rows], c, delta, reg_w)
+        a, _ = _minmax_lp(s[rows], JF[rows], c, delta, reg_w)
         if a is None:
-            return None, None
+            break
         model = s + JF @ (a - c)
+        spread = float(model.max() - model.min())
+        if best[1] is None or spread < best[1]:
+            best = (a, spread)
         lo, hi = model[rows].min(), model[rows].max()
-        out = np.nonzero((model > hi + 1e-9) | (model < lo - 1e-9))[0]
+        excess = np.maximum(model - hi, lo - model)
+        out = np.nonzero(excess > 1e-4 * max(hi - lo, 1e-12))[0]
         if len(out) == 0:
-            return a, predicted
-        worst = out[np.argsort(-np.maximum(model[out] - hi, lo - model[out]))[:2 * k]]
-        rows = np.union1d(rows, worst)
-    return a, float(model.max() - model.min())
+            break
+        rows = np.union1d(rows, out[np.argsort(-excess[out])[:max_add]])
+    return best
 
 
-def optimise(system, n_freq=None, max_iter=6, max_maps=8, qc_slack=None, active=200, reg=1e-3,
+def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active=200, reg=1e-3,
              progress=None, real_faces=None):
     """Maximise the realised ``min mu / max mu`` over smooth boundary scale factors.
 
@@ -140,9 +145,11 @@ def optimise(system, n_freq=None, max_iter=6, max_maps=8, qc_slack=None, active=
     it, maps = 0, 0
     for it in range(1, max_iter + 1):
         progress(0.2 + 0.7 * it / max_iter, f'optimising boundary scale ({it})')
-        a, predicted = _model_lp(best['s'], JF, best['c'], delta, reg_w, active)
-        if a is None or best['spread'] - predicted < 1e-5 or maps >= max_maps:
+        if maps >= max_maps:
             break
+        a, predicted = _model_lp(best['s'], JF, best['c'], delta, reg_w, active)
+        if a is None or best['spread'] - predicted < 1e-3 * best['spread']:
+            break                         # no gain in this box, nor in any smaller one
         accepted = False
         for t in (1.0, 0.5, 0.25):
             cand = best['c'] + t * (a - best['c'])
@@ -156,7 +163,7 @@ def optimise(system, n_freq=None, max_iter=6, max_maps=8, qc_slack=None, active=
             if s_new is None:
                 continue
             spread = float(s_new.max() - s_new.min())
-            if spread >= best['spread'] - 1e-6:
+            if spread >= best['spread'] * (1 - 1e-4):
                 continue
             qc = _qc_mean(system, uv, keep)
             if qc > qc_budget:
