@@ -10,6 +10,10 @@ SURFACES = {
     'ridge': lambda x, y: np.exp(-4 * (x - 1.2)**2) + np.exp(-4 * (y + 1.2)**2),
     'saddle': lambda x, y: 0.4 * (x**2 - y**2),
     'flat': lambda x, y: 0.0 * x,
+    # beyond DESIGN.md: checks of generality, on shapes the method was not tuned on
+    'waves': lambda x, y: 0.3 * np.sin(2 * x) * np.cos(1.5 * y),
+    'monkey': lambda x, y: 0.1 * (x**3 - 3 * x * y**2),
+    'cliff': lambda x, y: 0.8 * np.tanh(3 * (x + y - 1.5)),
 }
 
 

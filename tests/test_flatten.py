@@ -156,3 +156,16 @@ def test_flatten_rejects_bad_input(bad, message):
         V, F = np.zeros((0, 3)), np.zeros((0, 3), int)
     with pytest.raises(ConformalError, match=message):
         flatten(V, F)
+
+
+@pytest.mark.parametrize('name', ['waves', 'monkey', 'cliff', 'edgebump'])
+def test_uniform_generalises(name):
+    """Surfaces and a resolution the method was not tuned on: never worse than `area`, no flips,
+    conformality within the budget, and close to the certified bound where it gains."""
+    V, F = make_surface(name, 33)
+    area = flatten(V, F, boundary='area', bound=False).report
+    r = flatten(V, F, boundary='uniform').report
+    assert r['flips'] == 0
+    assert r['mu_ratio'] >= area['mu_ratio'] - 1e-9
+    assert r['qc_mean'] <= r['qc_budget'] + 1e-9
+    assert r['mu_ratio'] >= 0.97 * r['bound_vertex']
