@@ -113,6 +113,7 @@ class FlattenOptions:
     margin: float = 0.001
     shared_layout: bool = False
     colormap: str = None
+    max_faces: int = 5_000_000
 
     @property
     def holes(self):
@@ -364,7 +365,8 @@ def compute_job(job, opts, progress=None, token=None):
         check_loose_edges(job.loose_edges, F_all)
     boundary = opts.boundary.lower()
     if len(seams) == 0 and _single_disk(F, len(V)):
-        res = flatten(V, F, boundary=boundary, fit=opts.fit.lower(), progress=step)
+        res = flatten(V, F, boundary=boundary, fit=opts.fit.lower(), progress=step,
+                      max_faces=opts.max_faces)
         if not np.isfinite(res.uv).all():
             raise ConformalError("the flattening produced non-finite UVs: the mesh is too degenerate; "
                                  "try the 'area' boundary mode or clean the mesh")
@@ -378,7 +380,7 @@ def compute_job(job, opts, progress=None, token=None):
                          island_scale='true' if opts.keep_relative_scale else 'normalise',
                          pack=True, margin=0.01, fit=opts.fit.lower(),
                          on_error='skip' if opts.skip_bad_islands else 'raise',
-                         tri_poly=md.tri_poly[tris], progress=step)
+                         tri_poly=md.tri_poly[tris], progress=step, max_faces=opts.max_faces)
         except ConformalError as exc:
             raise ConformalError(_addon_wording(str(exc))) from None
         ok = res.ok
@@ -868,7 +870,8 @@ class UV_OT_conformal_flatten(bpy.types.Operator):
                               skip_bad_islands=self.skip_bad_islands, packer=self.packer,
                               pack_shape=self.pack_shape, pack_rotate=self.pack_rotate,
                               margin=self.margin, shared_layout=self.shared_layout,
-                              colormap=get_prefs(context).colormap)
+                              colormap=get_prefs(context).colormap,
+                              max_faces=get_prefs(context).max_faces)
 
     def _done(self, reports):
         for w in warnings_of(reports):

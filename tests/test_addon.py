@@ -422,6 +422,7 @@ def test_panel_draws_report_and_sections(addon, bl):
     prefs = get_prefs(bpy.context)
     assert isinstance(prefs, ConformalFlattenPreferences)       # enabled: the real preferences
     log.clear()
-    fake_prefs = type('P', (), {'layout': FakeLayout(log), 'grid_size': 0, 'colormap': 'GRAY'})()
+    fake_prefs = type('P', (), {'layout': FakeLayout(log), 'grid_size': 0, 'colormap': 'GRAY',
+                                'max_faces': 1000})()
     ConformalFlattenPreferences.draw(fake_prefs, bpy.context)
-    assert ('prop', 'grid_size') in log and ('prop', 'colormap') in log
+    assert ('prop', 'grid_size') in log and ('prop', 'colormap') in log and ('prop', 'max_faces') in log

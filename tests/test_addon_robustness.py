@@ -110,3 +110,17 @@ def test_genuine_needle_still_works(addon, bl):
     buf = np.empty(2 * len(obj.data.loops), np.float32)
     obj.data.uv_layers.active.uv.foreach_get('vector', buf)
     assert np.isfinite(buf).all()
+
+
+@pytest.mark.parametrize('mode', ['OBJECT', 'EDIT'])
+def test_mesh_over_size_limit_fails_unchanged(addon, bl, mode):
+    """The preferences' size limit refuses a mesh before any work, with the counts in the message."""
+    V, polys = _grid(9)                      # 64 quads = 128 triangles
+    bl.mesh_object('big', V, polys)
+    prefs = bpy.context.preferences.addons['conformal_flatten'].preferences
+    prefs.max_faces = 100
+    try:
+        _fails_unchanged(bl, r'128 triangles, over the limit of 100', mode)
+    finally:
+        prefs.max_faces = 5_000_000
+    bpy.ops.uv.conformal_flatten(boundary='AREA')       # within the limit again: it works
