@@ -306,14 +306,8 @@ class _GeodesicPanel:
 
 
 def _panel_classes():
-    from .ui import CATEGORY, PARENT_IDS
-    out = []
-    for space, parent in PARENT_IDS.items():
-        prefix = 'VIEW3D' if space == 'VIEW_3D' else 'IMAGE'
-        out.append(type(f'{prefix}_PT_conformal_geodesic', (_GeodesicPanel, bpy.types.Panel), {
-            'bl_idname': f'{prefix}_PT_conformal_geodesic', 'bl_space_type': space,
-            'bl_category': CATEGORY, 'bl_parent_id': parent}))
-    return out
+    from .ui import sub_panel_classes
+    return sub_panel_classes(_GeodesicPanel, 'conformal_geodesic')
 
 
 _registered = []

@@ -281,15 +281,8 @@ class _SpherePanel:
 
 
 def _panel_classes():
-    from .ui import PARENT_IDS, CATEGORY
-    out = []
-    for space, parent in PARENT_IDS.items():
-        prefix = 'VIEW3D' if space == 'VIEW_3D' else 'IMAGE'
-        cls = type(f'{prefix}_PT_conformal_sphere', (_SpherePanel, bpy.types.Panel), {
-            'bl_idname': f'{prefix}_PT_conformal_sphere', 'bl_space_type': space,
-            'bl_category': CATEGORY, 'bl_parent_id': parent})
-        out.append(cls)
-    return out
+    from .ui import sub_panel_classes
+    return sub_panel_classes(_SpherePanel, 'conformal_sphere')
 
 
 _registered = []

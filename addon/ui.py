@@ -26,6 +26,19 @@ PARENT_IDS = {'VIEW_3D': 'VIEW3D_PT_conformal_flatten', 'IMAGE_EDITOR': 'IMAGE_P
 _sections = []          # (label, draw) pairs
 
 
+def sub_panel_classes(mixin, name):
+    """One sub-panel class per editor (3D Viewport and UV Editor sidebars, tab "Conformal") under the
+    main panel, from a ``mixin`` with ``bl_label`` and ``draw``; ``name`` gives their ``bl_idname``s
+    (``VIEW3D_PT_<name>``, ``IMAGE_PT_<name>``). Register and unregister them like any class."""
+    out = []
+    for space, parent in PARENT_IDS.items():
+        idname = f"{'VIEW3D' if space == 'VIEW_3D' else 'IMAGE'}_PT_{name}"
+        out.append(type(idname, (mixin, bpy.types.Panel), {
+            'bl_idname': idname, 'bl_space_type': space, 'bl_category': CATEGORY,
+            'bl_parent_id': parent}))
+    return out
+
+
 def add_section(label, draw):
     """Add ``draw(layout, context)`` as a boxed section called ``label`` to both panels."""
     remove_section(draw)
