@@ -17,6 +17,15 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 CHILD = r'''
 import json, resource, sys, time
+def peak_mb():
+    # VmHWM starts afresh at exec; ru_maxrss would include the forked parent (bpy) before exec
+    try:
+        for line in open('/proc/self/status'):
+            if line.startswith('VmHWM:'):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 sys.path.insert(0, {root!r})
 from core import flatten, make_surface
 V, F = make_surface({surface!r}, {n})
@@ -25,7 +34,7 @@ r = flatten(V, F, boundary={mode!r}, bound=False).report
 sec = time.perf_counter() - t
 print(json.dumps(dict(seconds=sec, parts=r['seconds'], mu_ratio=r['mu_ratio'], qc_mean=r['qc_mean'],
                       flips=r['flips'], faces=r['faces'],
-                      peak_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)))
+                      peak_mb=peak_mb())))
 '''
 
 
