@@ -103,8 +103,21 @@ def _model_lp(s, JF, c, delta, reg_w, active=200, max_rounds=6, max_add=1000):
     return best
 
 
+def _representatives(system, uv, s, keep, bins):
+    """Indices into ``s`` (the counted triangles) of the highest and the lowest triangle in each cell
+    of a ``bins`` x ``bins`` grid over the UV map ``uv`` (n,2)."""
+    C = uv[system.F[keep]].mean(axis=1)
+    lo, hi = C.min(0), C.max(0)
+    ij = np.minimum(((C - lo) / np.maximum(hi - lo, 1e-300) * bins).astype(np.int64), bins - 1)
+    cell = ij[:, 0] * bins + ij[:, 1]
+    order = np.lexsort((s, cell))               # by cell, then by s
+    first = np.r_[True, cell[order][1:] != cell[order][:-1]]
+    last = np.r_[cell[order][1:] != cell[order][:-1], True]
+    return np.unique(np.r_[order[first], order[last]])
+
+
 def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active=200, reg=1e-3,
-             progress=None, real_faces=None):
+             bins=64, progress=None, real_faces=None):
     """Maximise the realised ``min mu / max mu`` over smooth boundary scale factors.
 
     system: ``DiskSystem``. n_freq: Fourier modes of u_B (default grows with the boundary length, at
@@ -112,7 +125,10 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     area-weighted mean quasi-conformal distortion over the ``area`` map (default: half its excess over
     1, at least 0.002). active: faces per side the LP starts from. reg: weight of the step-length
     term (per unit of |coefficient| times frequency, relative to the spread). real_faces: optional
-    (m,) bool; only these triangles count in the objective and the conformality budget.
+    (m,) bool; only these triangles count in the objective and the conformality budget. bins: the
+    LP sees, in each cell of a bins x bins grid over the current UV map, only the highest and the
+    lowest triangle (the response rows are smooth, so neighbours are near-duplicates); the realised
+    map is always measured on every triangle.
     Returns ``u`` (n,), ``uv`` (n,2) and a dict for the report."""
     progress = progress or (lambda f, msg: None)
     nb = len(system.B)
@@ -147,7 +163,8 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
         progress(0.2 + 0.7 * it / max_iter, f'optimising boundary scale ({it})')
         if maps >= max_maps:
             break
-        a, predicted = _model_lp(best['s'], JF, best['c'], delta, reg_w, active)
+        reps = _representatives(system, best['uv'], best['s'], keep, bins)
+        a, predicted = _model_lp(best['s'][reps], JF[reps], best['c'], delta, reg_w, active)
         if a is None or best['spread'] - predicted < 1e-3 * best['spread']:
             break                         # no gain in this box, nor in any smaller one
         accepted = False
