@@ -23,8 +23,10 @@ import numpy as np
 from .errors import ConformalError
 from .geometry import angle_sums, face_areas
 from .laplacian import cotan_laplacian, face_gradients, gradient, divergence
-from .measures import uv_measures, conformal_factor, local_frames, jacobians_from_frames
-from .solve import Factor
+from .measures import local_frames, jacobians_from_frames, measures_from_jacobians
+from .solve import Factor, factor_all
+from .lscm import lscm
+from .uniform import optimise, vertex_bound
 from .validate import check_mesh, normalise_scale, DEFAULT_MAX_FACES
 
 BOUNDARY_MODES = ('free', 'area', 'uniform')
@@ -53,7 +55,7 @@ class DiskSystem:
     defect, ``k`` (nb,) boundary turning angles, ``l`` (nb,) boundary edge lengths (edge j runs from
     B[j] to B[j+1])."""
 
-    def __init__(self, V, F, loop):
+    def __init__(self, V, F, loop, neumann=True):
         self.V, self.F = V, F
         n = self.n = len(V)
         self.B = np.asarray(loop, np.int64)
@@ -64,8 +66,14 @@ class DiskSystem:
         LI = self.L[self.I]
         self.L_II = LI[:, self.I].tocsc()
         self.L_IB = LI[:, self.B].tocsc()
-        self._II = Factor(self.L_II) if len(self.I) else None
-        self._neumann = None
+        keep = np.arange(n) != self.B[0]
+        self._keep = keep
+        if neumann and len(self.I):
+            # L_II for the Yamabe and harmonic solves, L without one vertex for the conjugate
+            self._II, self._neumann = factor_all(self.L_II, self.L[keep][:, keep])
+        else:
+            self._II = Factor(self.L_II) if len(self.I) else None
+            self._neumann = None
         s = angle_sums(V, F)
         self.Omega = np.where(mask, 0.0, 2 * np.pi - s)
         self.k = np.pi - s[self.B]
@@ -120,9 +128,7 @@ class DiskSystem:
         """Conjugate harmonic ``y`` (n,) of ``x`` (n,): least-squares ``grad y = n x grad x``, i.e.
         ``L y = div(n x grad x)``, with y fixed at one boundary vertex."""
         if self._neumann is None:
-            keep = np.arange(self.n) != self.B[0]
-            self._keep = keep
-            self._neumann = Factor(self.L[keep][:, keep])
+            self._neumann = Factor(self.L[self._keep][:, self._keep])
         X = np.cross(self.N, gradient(self.G, self.F, x))
         b = divergence(self.G, self.F, self.A, X, self.n)
         y = np.zeros(self.n)
@@ -210,7 +216,7 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     timings['check'] = time.perf_counter() - t0
     report_progress(0.05, 'factorising the Laplacian')
     t = time.perf_counter()
-    system = DiskSystem(V, F, info.boundary)
+    system = DiskSystem(V, F, info.boundary, neumann=boundary != 'free')
     timings['factor'] = time.perf_counter() - t
     report_progress(0.25, 'solving')
     report = {'boundary': boundary, 'vertices': len(V), 'faces': len(F),
@@ -218,20 +224,17 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     u = None
     t = time.perf_counter()
     if boundary == 'free':
-        from .lscm import lscm
         uv = lscm(V, system.L, system.B)
     elif boundary == 'area':
         u = system.yamabe(np.zeros(len(system.B)))
         uv = system.map_from_u(u)
     else:
-        from .uniform import optimise
         u, uv, opt = optimise(system, progress=report_progress, real_faces=mask, **options)
         report.update(opt)
     timings['solve'] = time.perf_counter() - t
     if bound is None:
         bound = boundary == 'uniform' and len(F) <= AUTO_BOUND_FACES
     if bound:
-        from .uniform import vertex_bound
         report_progress(0.9, 'certifying the bound')
         t = time.perf_counter()
         try:
@@ -243,12 +246,14 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     report_progress(0.95, 'measuring')
     Fm = F if mask is None else F[mask]
     uv = normalise_uv(V, Fm, uv, fit)
-    report.update(uv_measures(V, Fm, uv))
+    J, A = system.jacobians(uv), system.A
+    measured, mu_real = measures_from_jacobians(*((J, A) if mask is None else (J[mask], A[mask])))
+    report.update(measured)
     if u is not None:
         used = np.unique(Fm)
         report['vertex_ratio'] = float(np.exp(u[used].min() - u[used].max()))
     mu = np.full(len(F), np.nan)
-    mu[np.arange(len(F)) if mask is None else mask] = conformal_factor(V, Fm, uv)
+    mu[np.arange(len(F)) if mask is None else mask] = mu_real
     if fit == 'true_scale':
         uv = uv * unit
     timings['total'] = time.perf_counter() - t0

@@ -76,14 +76,19 @@ def summarise(mu, qc, A, orient):
     }
 
 
-def uv_measures(V, F, UV):
-    """DESIGN.md section 3 measures of a UV map: dict with faces, flips, mu_ratio, mu_ratio_p1_p99,
-    qc_mean (area-weighted) and qc_max. ``V`` (n,3), ``F`` (m,3), ``UV`` (n,2)."""
-    J, A = jacobians(V, F, UV)
+def measures_from_jacobians(J, A):
+    """DESIGN.md section 3 measures from per-triangle Jacobians ``J`` (m,2,2) and 3D areas ``A`` (m,):
+    (report dict, per-triangle ``mu`` (m,))."""
     s = singular_values(J)
     det = determinants(J)
     c = np.sqrt((np.abs(det) * A).sum() / A.sum())
     mu = np.sqrt(np.abs(det)) / c
     qc = s[:, 0] / np.maximum(s[:, 1], np.finfo(float).tiny)
     orient = det * np.sign(np.median(det))
-    return summarise(mu, qc, A, orient)
+    return summarise(mu, qc, A, orient), mu
+
+
+def uv_measures(V, F, UV):
+    """DESIGN.md section 3 measures of a UV map: dict with faces, flips, mu_ratio, mu_ratio_p1_p99,
+    qc_mean (area-weighted) and qc_max. ``V`` (n,3), ``F`` (m,3), ``UV`` (n,2)."""
+    return measures_from_jacobians(*jacobians(V, F, UV))[0]

@@ -45,11 +45,11 @@ def unique_edges(F):
     return np.stack([key // n, key % n], axis=1), counts
 
 
-def boundary_loops(F, n):
+def boundary_loops(F, n, twin=None):
     """Boundary loops as a list of (k,) int arrays of vertex indices, longest first. Each loop runs
     with the surface on its left (the faces' counter-clockwise direction)."""
     H = halfedges(F)
-    tw = twin_halfedges(F, n)
+    tw = twin_halfedges(F, n) if twin is None else twin
     B = H[tw < 0]
     if len(B) == 0:
         return []
@@ -84,28 +84,28 @@ def connected_components_of(F, n):
     return connected_components(vertex_adjacency(F, n), directed=False)
 
 
-def face_components(F, n):
+def face_components(F, n, twin=None):
     """(count, labels (m,)) of triangles connected through shared edges."""
     m = len(F)
-    tw = twin_halfedges(F, n)
+    tw = twin_halfedges(F, n) if twin is None else twin
     t = np.arange(3 * m) // 3
     ok = tw >= 0
     A = sp.coo_matrix((np.ones(ok.sum()), (t[ok], tw[ok] // 3)), shape=(m, m))
     return connected_components(A, directed=False)
 
 
-def euler_characteristic(F):
-    """V - E + F over the vertices referenced by ``F``."""
+def euler_characteristic(F, n_edges=None):
+    """V - E + F over the vertices referenced by ``F`` (``n_edges``: the edge count, if known)."""
     nv = int(np.count_nonzero(np.bincount(F.ravel())))
-    ne = len(unique_edges(F)[0])
+    ne = len(unique_edges(F)[0]) if n_edges is None else n_edges
     return nv - ne + len(F)
 
 
-def vertex_fans(F, n):
+def vertex_fans(F, n, twin=None):
     """(n,) number of edge-connected fans of triangles around each vertex. A manifold vertex has 1;
     2 or more means the surface pinches there (a non-manifold vertex)."""
     m = len(F)
-    tw = twin_halfedges(F, n)
+    tw = twin_halfedges(F, n) if twin is None else twin
     # corner c = 3t+k sits at F[t,k]; half-edge 3t+k leaves it. Its twin 3t'+k' arrives at the same
     # vertex, which is corner 3t'+(k'+1)%3 of the other triangle.
     c = np.arange(3 * m)

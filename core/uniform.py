@@ -153,7 +153,10 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     qc_budget = qc0 + qc_slack
     progress(0.15, 'boundary response')
     H = system.harmonic(Phi)                          # (n, K): response of u to the coefficients
-    JF = H[system.F[keep]].mean(axis=1)               # (m, K): linear model of s_T
+    Fk = system.F[keep]
+    rows = np.repeat(np.arange(len(Fk)), 3)
+    avg = sp.csr_matrix((np.full(3 * len(Fk), 1.0 / 3.0), (rows, Fk.ravel())), shape=(len(Fk), system.n))
+    JF = avg @ H                                      # (m, K): linear model of s_T (face means)
     best = dict(c=np.zeros(Phi.shape[1]), u=u0, uv=uv0, s=s0, spread=float(s0.max() - s0.min()),
                 qc=qc0)
     delta = best['spread']

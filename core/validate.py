@@ -118,17 +118,18 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
         bad = np.nonzero(~used)[0]
         raise ConformalError(f"mesh has {_plural(len(bad), 'loose vertex')} in no face "
                              f"(vertices {_examples(bad)}): delete loose geometry")
-    fans = topology.vertex_fans(F, n)
+    twin = topology.twin_halfedges(F, n)
+    fans = topology.vertex_fans(F, n, twin)
     if (fans > 1).any():
         bad = np.nonzero(fans > 1)[0]
         raise ConformalError(f"mesh has {_plural(len(bad), 'non-manifold vertex')} where separate "
                              f"fans of faces touch (vertices {_examples(bad)}): split or rip them apart")
-    ncomp, _ = topology.face_components(F, n)
+    ncomp, _ = topology.face_components(F, n, twin)
     if ncomp > 1 and not (allow_parts and kind == 'surface'):
         raise ConformalError(f"mesh has {ncomp} separate parts: flatten one connected piece at a time "
                              "(separate by loose parts), or flatten the islands one by one")
-    loops = topology.boundary_loops(F, n)
-    chi = topology.euler_characteristic(F)
+    loops = topology.boundary_loops(F, n, twin)
+    chi = topology.euler_characteristic(F, len(E))
     info = MeshInfo(n_vertices=n, n_faces=m, loops=loops, euler=chi)
     if kind == 'disk':
         if not loops:
