@@ -2,7 +2,7 @@
 
 The paper's objective is to maximise ``min mu / max mu``. In the log scale ``u`` this is: minimise
 ``max(u) - min(u)`` over the boundary values ``u_B``, with the interior given by the Yamabe equation
-``L_II u_I = Omega_I - L_IB u_B`` (DESIGN.md section 2). Because ``u = u0 + harmonic(u_B)`` is affine in
+``L_II u_I = -Omega_I - L_IB u_B`` (DESIGN.md section 2, written there for ``-u``). Because ``u = u0 + harmonic(u_B)`` is affine in
 ``u_B``, the vertex-level problem is a linear program; ``vertex_bound`` solves it exactly (active set
 over the interior vertices) and reports the certified optimum.
 
@@ -11,10 +11,12 @@ the boundary. ``optimise`` therefore works in a smooth, low-dimensional basis of
 of the boundary arc length, which are the eigenvectors of the boundary loop's Laplacian for uniform
 spacing) and runs a sequential linear program on the *realised* per-triangle log scale
 ``s_T = 0.5 log(A_uv / A_3d)``: each step linearises ``s_T`` through the vertex response
-``H = harmonic(Phi)`` averaged over each triangle, solves the min-max LP inside a trust region, builds
-the map (boundary curve, harmonic x, conjugate y) and keeps the step only if the realised ratio
-improves with no flipped triangle and conformality inside the budget. Every step costs one multi-RHS
-solve with the prefactored ``L_II`` and one with the Neumann Laplacian.
+``H = harmonic(Phi)`` (one multi-RHS solve with the prefactored ``L_II``) averaged over each triangle,
+solves the min-max LP inside a trust region (an active set of rows, each grid cell of the UV map
+represented by its highest and lowest triangle, plus a small smoothness term), builds the map
+(boundary curve, harmonic x, conjugate y: one solve with ``L_II`` and one with the Neumann
+Laplacian) and keeps the step, or a half or quarter of it, only if the realised ratio improves with
+no flipped triangle and conformality inside the budget.
 """
 import numpy as np
 from scipy.optimize import linprog
@@ -121,9 +123,9 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     """Maximise the realised ``min mu / max mu`` over smooth boundary scale factors.
 
     system: ``DiskSystem``. n_freq: Fourier modes of u_B (default grows with the boundary length, at
-    most 24). max_iter: outer steps (each builds at most three maps); max_maps: maps built in all. qc_slack: allowed rise of the
-    area-weighted mean quasi-conformal distortion over the ``area`` map (default: half its excess over
-    1, at least 0.002). active: faces per side the LP starts from. reg: weight of the step-length
+    most 16). max_iter: outer steps (each builds at most three maps); max_maps: maps built in all.
+    qc_slack: allowed rise of the area-weighted mean quasi-conformal distortion over the ``area`` map
+    (default: half its excess over 1, at least 0.002). active: faces per side the LP starts from. reg: weight of the step-length
     term (per unit of |coefficient| times frequency, relative to the spread). real_faces: optional
     (m,) bool; only these triangles count in the objective and the conformality budget. bins: the
     LP sees, in each cell of a bins x bins grid over the current UV map, only the highest and the
