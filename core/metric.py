@@ -77,10 +77,9 @@ class PlaneGrid:
         ny, nx = self.shape
         return self.origin[0] + self.h * np.arange(nx), self.origin[1] + self.h * np.arange(ny)
 
-    def bilinear(self, P):
-        """Bilinear interpolation of node values at points ``P`` (k,2): flat node indices (k,4) and
-        weights (k,4). Corners that are not valid get weight 0 and the others are renormalised.
-        Raises ``ConformalError`` if a point has no valid corner."""
+    def corner_weights(self, P):
+        """Bilinear corners of points ``P`` (k,2): flat node indices (k,4) and weights (k,4), the
+        weights of corners that are not valid set to 0 (not renormalised)."""
         ny, nx = self.shape
         s = (np.asarray(P, np.float64) - self.origin) / self.h
         j0 = np.clip(np.floor(s[:, 0]).astype(np.int64), 0, nx - 2)
@@ -92,12 +91,18 @@ class PlaneGrid:
         wts = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], 1)
         if self.valid is not None:
             wts = wts * self.valid.ravel()[idx]
-            tot = wts.sum(1)
-            if (tot <= 1e-12).any():
-                raise ConformalError("a point lies outside the flattened domain at this grid size: "
-                                     "increase the grid")
-            wts = wts / tot[:, None]
         return idx, wts
+
+    def bilinear(self, P):
+        """Bilinear interpolation of node values at points ``P`` (k,2): flat node indices (k,4) and
+        weights (k,4). Corners that are not valid get weight 0 and the others are renormalised.
+        Raises ``ConformalError`` if a point has no valid corner."""
+        idx, wts = self.corner_weights(P)
+        tot = wts.sum(1)
+        if (tot <= 1e-12).any():
+            raise ConformalError("a point lies outside the flattened domain at this grid size: "
+                                 "increase the grid")
+        return idx, wts / tot[:, None]
 
     def field(self, uv, F, values):
         """Per-vertex ``values`` (n,) interpolated linearly onto the valid nodes (extrapolated on the
@@ -210,16 +215,7 @@ def smoothness_root(grid, spline, dirichlet=1.0, curvature=0.0):
 def _sample_soft(grid, field, P, fallback):
     """Bilinear samples (k,) of ``field`` at points ``P`` (k,2) over valid corners; ``fallback``
     where a point has no valid corner."""
-    ny, nx = grid.shape
-    s = (P - grid.origin) / grid.h
-    j0 = np.clip(np.floor(s[:, 0]).astype(np.int64), 0, nx - 2)
-    i0 = np.clip(np.floor(s[:, 1]).astype(np.int64), 0, ny - 2)
-    fx = np.clip(s[:, 0] - j0, 0.0, 1.0)
-    fy = np.clip(s[:, 1] - i0, 0.0, 1.0)
-    base = i0 * nx + j0
-    idx = np.stack([base, base + 1, base + nx, base + nx + 1], 1)
-    wts = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], 1)
-    wts = wts * grid.valid.ravel()[idx]
+    idx, wts = grid.corner_weights(P)
     tot = wts.sum(1)
     vals = np.where(wts > 0, field.ravel()[idx], 0.0)
     with np.errstate(invalid='ignore', divide='ignore'):
