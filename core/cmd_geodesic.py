@@ -4,15 +4,12 @@ Writes one geodesic distance per vertex (input vertex order, mesh units, ``%.9g`
 the source vertices (0-based indices into the OBJ's ``v`` lines). The file is written only when the
 whole computation succeeded."""
 import json
-import os
-import tempfile
 
 import numpy as np
 
-from .errors import ConformalError
 from .flatten import BOUNDARY_MODES
 from .geodesic import SOLVERS, geodesic_distance
-from .objio import read_obj
+from .objio import read_obj, write_values
 
 
 def add_arguments(p):
@@ -34,19 +31,7 @@ def run(args):
     F, _ = mesh.triangles()
     dist, report = geodesic_distance(mesh.V, F, sources=np.asarray(args.source, np.int64),
                                      boundary=args.boundary, grid=args.grid, solver=args.solver)
-    out_dir = os.path.dirname(os.path.abspath(args.out))
-    try:
-        fd, tmp = tempfile.mkstemp(prefix='.geodesic-', suffix='.txt', dir=out_dir)
-    except OSError as exc:
-        raise ConformalError(f"cannot write {args.out}: {exc.strerror}") from None
-    try:
-        with os.fdopen(fd, 'w') as fh:
-            np.savetxt(fh, dist, fmt='%.9g')
-        os.replace(tmp, args.out)
-    except OSError as exc:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise ConformalError(f"cannot write {args.out}: {exc.strerror}") from None
+    write_values(args.out, dist)
     if args.json:
         print(json.dumps(report))
     else:

@@ -4,8 +4,6 @@ TIMES.csv: one measurement per row, ``source_vertex,sensor_vertex,time`` (0-base
 the OBJ's vertex order, time in mesh length units times the metric), optional header line. OUT.txt:
 one recovered metric value per vertex, in the OBJ's vertex order."""
 import json
-import os
-import tempfile
 
 import numpy as np
 
@@ -13,7 +11,7 @@ from .errors import ConformalError
 from .flatten import BOUNDARY_MODES
 from .metric import (DEFAULT_CELLS, DEFAULT_CONTROL, DEFAULT_CURVATURE, DEFAULT_NOISE, DEFAULT_SMOOTHNESS,
                      read_times, reconstruct)
-from .objio import read_obj
+from .objio import read_obj, write_values
 
 
 def add_arguments(p):
@@ -35,23 +33,6 @@ def add_arguments(p):
                    help=f'weight of the thin-plate smoothness term (default {DEFAULT_CURVATURE:g})')
     p.add_argument('--max-iter', type=int, default=60, help='maximum iterations (default 60)')
     p.add_argument('--json', action='store_true', help='print the report as JSON')
-
-
-def write_values(path, values):
-    """Write one value per line, atomically (a temporary file renamed into place)."""
-    folder = os.path.dirname(os.path.abspath(path))
-    try:
-        fd, tmp = tempfile.mkstemp(prefix='.metric-', suffix='.txt', dir=folder)
-    except OSError as exc:
-        raise ConformalError(f"cannot write {path}: {exc.strerror}") from None
-    try:
-        with os.fdopen(fd, 'w') as fh:
-            fh.write('\n'.join(f'{v:.9g}' for v in values) + '\n')
-        os.replace(tmp, path)
-    except OSError as exc:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise ConformalError(f"cannot write {path}: {exc.strerror}") from None
 
 
 def run(args):

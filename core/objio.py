@@ -3,6 +3,7 @@
 Vertices are identified by their ``v`` index, so UV seams (``vt`` indices) in the input do not split
 the mesh. Faces may be n-gons in any ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn`` form."""
 import os
+import tempfile
 
 import numpy as np
 
@@ -94,18 +95,33 @@ def write_obj(path, V, F, UV=None, UV_faces=None):
     V = np.asarray(V, np.float64)
     F = _index_lists(F)
     T = F if UV_faces is None else _index_lists(UV_faces)
-    tmp = f"{path}.tmp{os.getpid()}"
+    lines = [f"v {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in V.tolist()]
+    if UV is not None:
+        lines += [f"vt {u:.9g} {v:.9g}\n" for u, v in np.asarray(UV, float).tolist()]
+        lines += ['f ' + ' '.join(f"{i}/{j}" for i, j in zip(f, t)) + '\n' for f, t in zip(F, T)]
+    else:
+        lines += ['f ' + ' '.join(str(i) for i in f) + '\n' for f in F]
+    write_text(path, ''.join(lines))
+
+
+def write_values(path, values):
+    """Write one number per line (``values`` (n,), ``%.9g``), atomically like ``write_text``."""
+    write_text(path, ''.join(f"{v:.9g}\n" for v in np.asarray(values, np.float64).tolist()))
+
+
+def write_text(path, text):
+    """Write ``text`` to ``path`` through a temporary file in the same folder renamed into place, so a
+    failure leaves neither a partial output nor the temporary file. Raises ``ConformalError``."""
+    folder = os.path.dirname(os.path.abspath(path))
     try:
-        with open(tmp, 'w') as fh:
-            fh.write(''.join(f"v {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in V.tolist()))
-            if UV is not None:
-                fh.write(''.join(f"vt {u:.9g} {v:.9g}\n" for u, v in np.asarray(UV, float).tolist()))
-                fh.write(''.join('f ' + ' '.join(f"{i}/{j}" for i, j in zip(f, t)) + '\n'
-                                 for f, t in zip(F, T)))
-            else:
-                fh.write(''.join('f ' + ' '.join(str(i) for i in f) + '\n' for f in F))
+        fd, tmp = tempfile.mkstemp(prefix='.conformal-', suffix='.tmp', dir=folder)
+    except OSError as exc:
+        raise ConformalError(f"cannot write {path}: {exc.strerror}") from None
+    try:
+        with os.fdopen(fd, 'w') as fh:
+            fh.write(text)
         os.replace(tmp, path)
     except OSError as exc:
         if os.path.exists(tmp):
-            os.remove(tmp)
+            os.unlink(tmp)
         raise ConformalError(f"cannot write {path}: {exc.strerror}") from None
