@@ -21,7 +21,7 @@ import time
 
 import bpy
 import numpy as np
-from bpy.props import EnumProperty, IntProperty, PointerProperty
+from bpy.props import EnumProperty, IntProperty
 
 from ..core.errors import ConformalError
 from ..core.flatten import flatten
@@ -305,27 +305,18 @@ class _GeodesicPanel:
             draw_report(layout.box(), report, GEODESIC_ROWS)
 
 
-def _panel_classes():
-    from .ui import sub_panel_classes
-    return sub_panel_classes(_GeodesicPanel, 'conformal_geodesic')
-
-
 _registered = []
 
 
 def register():
-    bpy.utils.register_class(ConformalGeodesicSettings)
-    bpy.types.Scene.conformal_geodesic = PointerProperty(type=ConformalGeodesicSettings)
-    bpy.utils.register_class(MESH_OT_conformal_geodesic_distance)
-    for cls in _panel_classes():
-        bpy.utils.register_class(cls)
-        _registered.append(cls)
+    from .ui import register_tool
+    _registered[:] = register_tool(ConformalGeodesicSettings, 'conformal_geodesic',
+                                   MESH_OT_conformal_geodesic_distance, _GeodesicPanel,
+                                   'conformal_geodesic')
 
 
 def unregister():
-    for cls in reversed(_registered):
-        bpy.utils.unregister_class(cls)
+    from .ui import unregister_tool
+    unregister_tool(ConformalGeodesicSettings, 'conformal_geodesic',
+                    MESH_OT_conformal_geodesic_distance, _registered)
     _registered.clear()
-    bpy.utils.unregister_class(MESH_OT_conformal_geodesic_distance)
-    del bpy.types.Scene.conformal_geodesic
-    bpy.utils.unregister_class(ConformalGeodesicSettings)

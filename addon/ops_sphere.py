@@ -20,7 +20,7 @@ import time
 
 import bpy
 import numpy as np
-from bpy.props import BoolProperty, EnumProperty, PointerProperty
+from bpy.props import BoolProperty, EnumProperty
 
 from ..core.errors import ConformalError
 from ..core.geometry import face_areas
@@ -280,27 +280,16 @@ class _SpherePanel:
             draw_report(box, report, SPHERE_ROWS)
 
 
-def _panel_classes():
-    from .ui import sub_panel_classes
-    return sub_panel_classes(_SpherePanel, 'conformal_sphere')
-
-
 _registered = []
 
 
 def register():
-    bpy.utils.register_class(ConformalSphereSettings)
-    bpy.types.Scene.conformal_sphere = PointerProperty(type=ConformalSphereSettings)
-    bpy.utils.register_class(UV_OT_conformal_sphere)
-    for cls in _panel_classes():
-        bpy.utils.register_class(cls)
-        _registered.append(cls)
+    from .ui import register_tool
+    _registered[:] = register_tool(ConformalSphereSettings, 'conformal_sphere', UV_OT_conformal_sphere,
+                                   _SpherePanel, 'conformal_sphere')
 
 
 def unregister():
-    for cls in reversed(_registered):
-        bpy.utils.unregister_class(cls)
+    from .ui import unregister_tool
+    unregister_tool(ConformalSphereSettings, 'conformal_sphere', UV_OT_conformal_sphere, _registered)
     _registered.clear()
-    bpy.utils.unregister_class(UV_OT_conformal_sphere)
-    del bpy.types.Scene.conformal_sphere
-    bpy.utils.unregister_class(ConformalSphereSettings)

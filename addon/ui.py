@@ -39,6 +39,27 @@ def sub_panel_classes(mixin, name):
     return out
 
 
+def register_tool(settings_cls, scene_attr, operator_cls, panel_mixin, panel_name):
+    """Register a tool: its settings as ``Scene.<scene_attr>``, its operator and its sidebar
+    sub-panels (``sub_panel_classes``). Returns the panel classes, for ``unregister_tool``."""
+    bpy.utils.register_class(settings_cls)
+    setattr(bpy.types.Scene, scene_attr, PointerProperty(type=settings_cls))
+    bpy.utils.register_class(operator_cls)
+    panels = sub_panel_classes(panel_mixin, panel_name)
+    for cls in panels:
+        bpy.utils.register_class(cls)
+    return panels
+
+
+def unregister_tool(settings_cls, scene_attr, operator_cls, panels):
+    """Undo ``register_tool``, in reverse order."""
+    for cls in reversed(panels):
+        bpy.utils.unregister_class(cls)
+    bpy.utils.unregister_class(operator_cls)
+    delattr(bpy.types.Scene, scene_attr)
+    bpy.utils.unregister_class(settings_cls)
+
+
 def add_section(label, draw):
     """Add ``draw(layout, context)`` as a boxed section called ``label`` to both panels."""
     remove_section(draw)
