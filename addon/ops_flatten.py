@@ -38,7 +38,7 @@ from ..core.errors import ConformalError
 from ..core.flatten import flatten
 from ..core.geometry import face_areas
 from ..core.islands import unwrap
-from ..core.measures import conformal_factor, uv_measures
+from ..core.measures import jacobians, measures_from_jacobians
 from ..core.validate import check_loose_edges
 from . import meshio
 from .colormap import colormap as colormap_rgba, normalise
@@ -477,7 +477,7 @@ def _final_measures(job, res, uv_tri):
     Vs = job.md.V[job.md.F[res.tris]].reshape(-1, 3)
     Fs = np.arange(3 * k).reshape(k, 3)
     UVs = uv_tri.reshape(-1, 2).astype(np.float64)
-    return uv_measures(Vs, Fs, UVs), conformal_factor(Vs, Fs, UVs)
+    return measures_from_jacobians(*jacobians(Vs, Fs, UVs))
 
 
 def _island_summary(r):

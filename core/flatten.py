@@ -154,16 +154,6 @@ class DiskSystem:
         return self.extend(self.boundary_curve(u))
 
 
-def face_log_scale(system, uv):
-    """Realised per-triangle log scale ``s_T = 0.5 log(A_uv / A_3d)`` (m,); uses signed UV areas, so
-    a flipped triangle yields NaN."""
-    W = uv[system.F]
-    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
-    a = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    with np.errstate(invalid='ignore', divide='ignore'):
-        return 0.5 * np.log(a / system.A)
-
-
 def normalise_uv(V, F, uv, fit='true_scale'):
     """Centre, rotate to principal axes and scale a UV map (n,2). ``true_scale``: total UV area equals
     total 3D area. ``unit_square``: fit into [0,1]^2 keeping the aspect ratio."""
