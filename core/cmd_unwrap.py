@@ -12,7 +12,7 @@ import numpy as np
 from .errors import ConformalError
 from .flatten import BOUNDARY_MODES
 from .islands import FITS, HOLE_MODES, ISLAND_SCALES, seams_from_corner_ids, unwrap
-from .objio import read_obj, write_obj
+from .objio import text_lines, read_obj, write_obj
 from .triangulate import triangulate
 from .validate import DEFAULT_MAX_FACES
 
@@ -48,26 +48,21 @@ def add_arguments(p):
 def read_seams(path, n):
     """(k,2) int64 0-based vertex pairs from a seams file (1-based numbers, ``#`` comments)."""
     pairs = []
-    try:
-        fh = open(path, 'r', encoding='utf-8', errors='replace')
-    except OSError as exc:
-        raise ConformalError(f"cannot read {path}: {exc.strerror}") from None
-    with fh:
-        for lineno, line in enumerate(fh, 1):
-            p = line.split('#', 1)[0].split()
-            if not p:
-                continue
-            try:
-                if len(p) != 2:
-                    raise ValueError("need two vertex numbers")
-                a, b = int(p[0]), int(p[1])
-            except ValueError as exc:
-                raise ConformalError(f"{path} line {lineno}: cannot parse {line.strip()[:60]!r} ({exc}): "
-                                     "write one seam per line as two 1-based vertex numbers") from None
-            if not (1 <= a <= n and 1 <= b <= n):
-                raise ConformalError(f"{path} line {lineno}: vertex numbers must lie in 1..{n} "
-                                     f"(1-based, as in the OBJ), got {a} {b}")
-            pairs.append((a - 1, b - 1))
+    for lineno, line in text_lines(path):
+        p = line.split('#', 1)[0].split()
+        if not p:
+            continue
+        try:
+            if len(p) != 2:
+                raise ValueError("need two vertex numbers")
+            a, b = int(p[0]), int(p[1])
+        except ValueError as exc:
+            raise ConformalError(f"{path} line {lineno}: cannot parse {line.strip()[:60]!r} ({exc}): "
+                                 "write one seam per line as two 1-based vertex numbers") from None
+        if not (1 <= a <= n and 1 <= b <= n):
+            raise ConformalError(f"{path} line {lineno}: vertex numbers must lie in 1..{n} "
+                                 f"(1-based, as in the OBJ), got {a} {b}")
+        pairs.append((a - 1, b - 1))
     return np.array(pairs, np.int64).reshape(-1, 2)
 
 

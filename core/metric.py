@@ -43,6 +43,7 @@ from scipy.interpolate import BSpline
 from scipy.optimize import least_squares
 
 from .errors import ConformalError
+from .objio import text_lines
 
 SEED_RADIUS = 5.5        # source seed disk radius, in grid cells (DESIGN.md section 4, step 2);
                          # not an integer, so grid nodes rarely sit exactly on the seed circle
@@ -666,9 +667,5 @@ def parse_times(lines, n, name='times'):
 
 def read_times(path, n):
     """Read a travel-time CSV file (see ``parse_times``) for a mesh with ``n`` vertices."""
-    try:
-        with open(path, 'r', encoding='utf-8', errors='replace') as fh:
-            lines = fh.read().splitlines()
-    except OSError as exc:
-        raise ConformalError(f"cannot read {path}: {exc.strerror}") from None
+    lines = [line.rstrip('\r\n') for _, line in text_lines(path)]
     return parse_times(lines, n, name=os.path.basename(path))

@@ -31,45 +31,51 @@ class ObjMesh:
         return self.corner_verts[tri], tri_poly
 
 
-def read_obj(path):
-    """Read an OBJ file into an ``ObjMesh``. Raises ``ConformalError`` on unreadable input."""
-    V, corners, sizes, cuv, lines = [], [], [], [], []
-    nvt = 0
+def text_lines(path):
+    """Yield ``(line number from 1, line)`` of a text file; a file that cannot be opened raises
+    ``ConformalError`` (on the first iteration)."""
     try:
         fh = open(path, 'r', encoding='utf-8', errors='replace')
     except OSError as exc:
         raise ConformalError(f"cannot read {path}: {exc.strerror}") from None
     with fh:
-        for lineno, line in enumerate(fh, 1):
-            p = line.split()
-            if not p:
-                continue
-            try:
-                if p[0] == 'v':
-                    V.append((float(p[1]), float(p[2]), float(p[3])))
-                elif p[0] == 'vt':
-                    nvt += 1
-                elif p[0] == 'f':
-                    parts = [q.split('/') for q in p[1:]]
-                    idx = [int(q[0]) for q in parts]
-                    if len(idx) < 3:
-                        raise ValueError("a face needs at least 3 corners")
-                    if 0 in idx:
-                        raise ValueError("OBJ indices start at 1")
-                    nv = len(V)
-                    idx = [i - 1 if i > 0 else nv + i for i in idx]
-                    tex = [int(q[1]) if len(q) > 1 and q[1] else 0 for q in parts]
-                    tex = [t - 1 if t > 0 else (nvt + t if t < 0 else -1) for t in tex]
-                    corners.extend(idx)
-                    cuv.extend(tex)
-                    sizes.append(len(idx))
-                elif p[0] == 'l':
-                    idx = [int(q.split('/')[0]) for q in p[1:]]
-                    nv = len(V)
-                    idx = [i - 1 if i > 0 else nv + i for i in idx]
-                    lines.extend(zip(idx[:-1], idx[1:]))
-            except (ValueError, IndexError) as exc:
-                raise ConformalError(f"{path} line {lineno}: cannot parse {line.strip()[:60]!r} ({exc})") from None
+        yield from enumerate(fh, 1)
+
+
+def read_obj(path):
+    """Read an OBJ file into an ``ObjMesh``. Raises ``ConformalError`` on unreadable input."""
+    V, corners, sizes, cuv, lines = [], [], [], [], []
+    nvt = 0
+    for lineno, line in text_lines(path):
+        p = line.split()
+        if not p:
+            continue
+        try:
+            if p[0] == 'v':
+                V.append((float(p[1]), float(p[2]), float(p[3])))
+            elif p[0] == 'vt':
+                nvt += 1
+            elif p[0] == 'f':
+                parts = [q.split('/') for q in p[1:]]
+                idx = [int(q[0]) for q in parts]
+                if len(idx) < 3:
+                    raise ValueError("a face needs at least 3 corners")
+                if 0 in idx:
+                    raise ValueError("OBJ indices start at 1")
+                nv = len(V)
+                idx = [i - 1 if i > 0 else nv + i for i in idx]
+                tex = [int(q[1]) if len(q) > 1 and q[1] else 0 for q in parts]
+                tex = [t - 1 if t > 0 else (nvt + t if t < 0 else -1) for t in tex]
+                corners.extend(idx)
+                cuv.extend(tex)
+                sizes.append(len(idx))
+            elif p[0] == 'l':
+                idx = [int(q.split('/')[0]) for q in p[1:]]
+                nv = len(V)
+                idx = [i - 1 if i > 0 else nv + i for i in idx]
+                lines.extend(zip(idx[:-1], idx[1:]))
+        except (ValueError, IndexError) as exc:
+            raise ConformalError(f"{path} line {lineno}: cannot parse {line.strip()[:60]!r} ({exc})") from None
     if not V or not sizes:
         raise ConformalError(f"{path} has no vertices or no faces: the mesh is empty")
     V = np.array(V, dtype=np.float64)
