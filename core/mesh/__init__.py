@@ -1,0 +1,1 @@
+"""Mesh basics: geometry, operators, topology, validation."""
