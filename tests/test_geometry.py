@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from core.geometry import angle_sums, corner_angles, face_areas
-from core.laplacian import cotan_laplacian, face_gradients, gradient, divergence
+from core.mesh.geometry import angle_sums, corner_angles, face_areas
+from core.mesh.laplacian import cotan_laplacian, face_gradients, gradient, divergence
 from core.surfaces import make_surface
-from core.topology import boundary_loops, euler_characteristic
-from core.validate import check_mesh
+from core.mesh.topology import boundary_loops, euler_characteristic
+from core.mesh.validate import check_mesh
 
 
 def octahedron():

@@ -3,7 +3,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import ConformalError
+from ..errors import ConformalError
 from .geometry import face_areas
 from . import topology
 

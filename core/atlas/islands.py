@@ -27,11 +27,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from .errors import ConformalError
-from .geometry import face_areas
-from .measures import uv_measures
-from . import topology
-from .validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, check_loose_edges, normalise_scale
+from ..errors import ConformalError
+from ..mesh.geometry import face_areas
+from ..mesh.measures import uv_measures
+from ..mesh import topology
+from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, check_loose_edges, normalise_scale
 
 HOLE_MODES = ('fill', 'cut', 'error')
 ISLAND_SCALES = ('true', 'normalise')
@@ -342,7 +342,7 @@ def _describe(i, n_isl, faces, tri_poly):
 def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
     """Flatten one island (local ``V`` (n,3), ``F`` (m,3), its boundary ``loops``). Returns (uv (n,2)
     in mesh units with UV area = 3D area, report dict)."""
-    from .flatten import flatten
+    from ..disk.flatten import flatten
     n, m = len(V), len(F)
     rep = {'loops': len(loops)}
     if not loops:

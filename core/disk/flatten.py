@@ -20,14 +20,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import ConformalError
-from .geometry import angle_sums, face_areas
-from .laplacian import cotan_laplacian, face_gradients, gradient, divergence
-from .measures import local_frames, jacobians_from_frames, measures_from_jacobians
-from .solve import Factor, factor_all
+from ..errors import ConformalError
+from ..mesh.geometry import angle_sums, face_areas
+from ..mesh.laplacian import cotan_laplacian, face_gradients, gradient, divergence
+from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians
+from ..mesh.solve import Factor, factor_all
 from .lscm import lscm
 from .uniform import optimise, vertex_bound
-from .validate import check_mesh, normalise_scale, DEFAULT_MAX_FACES
+from ..mesh.validate import check_mesh, normalise_scale, DEFAULT_MAX_FACES
 
 BOUNDARY_MODES = ('free', 'area', 'uniform')
 FIT_MODES = ('true_scale', 'unit_square')

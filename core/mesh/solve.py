@@ -6,7 +6,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .errors import ConformalError
+from ..errors import ConformalError
 
 
 WORKERS = min(2, os.cpu_count() or 1)
