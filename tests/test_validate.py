@@ -297,3 +297,20 @@ def test_quad_meshes_keep_their_defects_visible():
     F = cv[tri]
     from core.mesh import topology
     assert len(topology.duplicate_rows(F)) == 0 and topology.unique_edges(F)[1].max() <= 2
+
+
+def test_errors_carry_code_and_remedy():
+    """A ConformalError names its kind and remedy as data; str() is the core's wording of both."""
+    from core.errors import REMEDIES
+    V, F = _grid()
+    with pytest.raises(ConformalError) as err:
+        flatten(V, F, boundary='area', max_faces=10)
+    exc = err.value
+    assert exc.code == 'too_large' and exc.remedy == 'raise_limit'
+    assert str(exc) == f"{exc.problem}: {REMEDIES['raise_limit']}"
+    closed = np.vstack([F, F[:, ::-1] + 0])        # not a disk: duplicate reversed faces
+    with pytest.raises(ConformalError) as err:
+        flatten(V, closed, boundary='area')
+    assert err.value.code in ('bad_topology', 'no_boundary')
+    with pytest.raises(KeyError):
+        ConformalError("x", code='no_such_code')
