@@ -26,7 +26,7 @@ import bpy
 import numpy as np
 
 from ..core.errors import ConformalError
-from ..core.triangulate import triangulate
+from ..core.mesh.triangulate import triangulate
 from .colormap import colormap, normalise
 
 

@@ -33,13 +33,13 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty
 
-from ..core import topology
+from ..core.mesh import topology
 from ..core.errors import ConformalError
-from ..core.flatten import flatten
-from ..core.geometry import face_areas
-from ..core.islands import unwrap
-from ..core.measures import jacobians, measures_from_jacobians
-from ..core.validate import check_loose_edges
+from ..core.disk.flatten import flatten
+from ..core.mesh.geometry import face_areas
+from ..core.atlas.islands import unwrap
+from ..core.mesh.measures import jacobians, measures_from_jacobians
+from ..core.mesh.validate import check_loose_edges
 from . import meshio
 from .colormap import colormap as colormap_rgba, normalise
 from .prefs import get_prefs

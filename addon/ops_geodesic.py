@@ -24,8 +24,8 @@ import numpy as np
 from bpy.props import EnumProperty, IntProperty
 
 from ..core.errors import ConformalError
-from ..core.flatten import flatten
-from ..core.geodesic import face_mu, geodesic_distance
+from ..core.disk.flatten import flatten
+from ..core.geodesic.solver import face_mu, geodesic_distance
 from . import meshio
 from .colormap import colormap
 from .ops_flatten import BOUNDARY_ITEMS, REPORT_KEY as FLATTEN_REPORT_KEY, mesh_hash

@@ -23,8 +23,8 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty
 
 from ..core.errors import ConformalError
-from ..core.geometry import face_areas
-from ..core.sphere import sphere_map
+from ..core.mesh.geometry import face_areas
+from ..core.sphere.map import sphere_map
 from . import meshio
 from .prefs import get_prefs
 

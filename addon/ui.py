@@ -12,7 +12,6 @@ Hooks for other modules (geodesic, sphere, metric), which need no registration o
   ``PARENT_IDS['IMAGE_EDITOR']``.
 - ``draw_report(layout, report, rows)`` draws a stored report dict as label rows.
 """
-import importlib.util
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, PointerProperty
@@ -90,22 +89,9 @@ def draw_report(layout, report, rows):
 
 
 def geodesic_solver_label():
-    """Which eikonal solver geodesic distances will use: scikit-fmm if importable, else the core's
-    fallback solver."""
-    try:
-        from ..core import geodesic
-    except ImportError:
-        geodesic = None
-    for attr in ('solver_name', 'SOLVER', 'DEFAULT_SOLVER'):
-        value = getattr(geodesic, attr, None)
-        if callable(value):
-            try:
-                return str(value())
-            except Exception:       # a label must never break drawing
-                break
-        if isinstance(value, str):
-            return value
-    return "scikit-fmm" if importlib.util.find_spec('skfmm') else "built-in fast sweeping (no scikit-fmm)"
+    """Which eikonal solver geodesic distances will use (``core.geodesic.solver.solver_name``)."""
+    from ..core.geodesic.solver import solver_name
+    return solver_name()
 
 
 FLATTEN_ROWS = [

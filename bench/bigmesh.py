@@ -35,13 +35,13 @@ def child(mode, n):
 
     t = time.perf_counter()
     if mode.startswith('flatten'):
-        from core.flatten import flatten
+        from core.disk.flatten import flatten
         res = flatten(V, F, boundary=mode.split('-')[1], progress=progress, max_faces=None)
         rep = res.report
         out = {'flips': rep['flips'], 'qc_mean': rep['qc_mean'], 'mu_ratio': rep['mu_ratio'],
                'seconds_parts': rep.get('seconds')}
     else:
-        from core.islands import unwrap
+        from core.atlas.islands import unwrap
         mid = n // 2
         row = mid * n + np.arange(n - 1)                   # the horizontal grid line y = 0
         col = np.arange(n - 1) * n + mid                   # the vertical grid line x = 0
@@ -65,8 +65,8 @@ def main():
     if args.child:
         child(args.child[0], int(args.child[1]))
         return
-    print(f"| mode | triangles | vertices | seconds | peak RSS MB | RSS after mesh MB | bytes/triangle "
-          f"| flips | qc_mean | mu_ratio |")
+    print("| mode | triangles | vertices | seconds | peak RSS MB | RSS after mesh MB | bytes/triangle "
+          "| flips | qc_mean | mu_ratio |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for size in args.sizes:
         n = int(round((size / 2) ** 0.5)) + 1

@@ -26,8 +26,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, 'bench'))
 
-from core.flatten import flatten  # noqa: E402
-from core.geodesic import geodesic_distance  # noqa: E402
+from core.disk.flatten import flatten  # noqa: E402
+from core.geodesic.solver import geodesic_distance  # noqa: E402
 from core.surfaces import make_surface  # noqa: E402
 
 EXCLUDE = 0.05

@@ -19,8 +19,8 @@ sys.path.insert(0, os.path.join(ROOT, 'tests'))
 import numpy as np  # noqa: E402
 
 from core.errors import ConformalError  # noqa: E402
-from core.islands import unwrap  # noqa: E402
-from core.objio import read_obj  # noqa: E402
+from core.atlas.islands import unwrap  # noqa: E402
+from core.io.obj import read_obj  # noqa: E402
 from meshgen import torus, two_holes, uv_sphere  # noqa: E402
 
 

@@ -69,7 +69,7 @@ def main(argv=None):
     rows = []
     t_read, md = best(lambda: meshio.read_mesh(obj, triangles=False), rep)
     rows.append(('read: positions + corner verts + loop starts', t_read))
-    from conformal_flatten.core.triangulate import triangulate
+    from conformal_flatten.core.mesh.triangulate import triangulate
     t_tri, _ = best(lambda: triangulate(md.corner_verts, md.sizes, md.V), rep)
     rows.append(('triangulate (core, numpy)', t_tri))
     md = meshio.read_mesh(obj)

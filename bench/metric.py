@@ -23,10 +23,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 from core import metric  # noqa: E402
-from core.cmd_reconstruct_demo import TRUE_METRIC_TEXT, demo, true_metric  # noqa: E402
-from core.flatten import flatten  # noqa: E402
+from core.cli.reconstruct_demo import TRUE_METRIC_TEXT, demo, true_metric  # noqa: E402
+from core.disk.flatten import flatten  # noqa: E402
 from core.surfaces import make_surface  # noqa: E402
-from core.topology import boundary_loops  # noqa: E402
 
 METRICS = {
     'demo': (true_metric, TRUE_METRIC_TEXT),

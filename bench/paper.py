@@ -7,7 +7,7 @@ set beside our ``area`` and ``uniform`` modes.
 
 Rows (all on ``core.surfaces.make_surface('bump', n)``, n = 65 by default):
 
-- ``midedge, uncontrolled``: Polthier's midedge map, the paper's Algorithm 1 (``core.midedge.midedge_map``).
+- ``midedge, uncontrolled``: Polthier's midedge map, the paper's Algorithm 1 (``core.disk.midedge.midedge_map``).
   The cut face is face 0, which touches the corner (-2,-2); ``u = -1, +1`` at its first two vertices;
   every other vertex, boundary included, has the natural condition. Sections 4 and Figures 1-2.
 - ``restricted, ramp``: the section 5 family at its starting point, ``u_B`` linear in arc length from 0
@@ -18,15 +18,15 @@ Rows (all on ``core.surfaces.make_surface('bump', n)``, n = 65 by default):
 - ``restricted, LP`` (only with ``--lp``): section 5.2 read as a sequential LP: all vertex values
   unknown, harmonic rows as equalities, the gradient norm bounded above by a polygon and below by its
   projection on the previous round's gradient direction (HiGHS). About a minute per round here.
-- ``area`` and ``uniform``: ``core.flatten.flatten`` (BFF with ``u_B = 0``; our L-inf mode).
+- ``area`` and ``uniform``: ``core.disk.flatten.flatten`` (BFF with ``u_B = 0``; our L-inf mode).
 
 Columns: mu_ratio (min/max per-triangle conformal factor), area_ratio (min/max per-triangle image
 area / surface area), qc_mean (area-weighted mean s1/s2), flips, geodesic relative error (mean and max
 over 3 sources x all vertices farther than 0.05 from the source, against the exact MMP references in
-``tests/data/geodesic_ref_bump_<n>.npz``) by ``core.geodesic.geodesic_distance`` on a grid of the same
+``tests/data/geodesic_ref_bump_<n>.npz``) by ``core.geodesic.solver.geodesic_distance`` on a grid of the same
 size (``--grid``) for every map, and the seconds to build the map (noisy: 2 shared cores).
 
-Midedge rows are measured on the medial triangles (``core.midedge.map_measures``): each carries
+Midedge rows are measured on the medial triangles (``core.disk.midedge.map_measures``): each carries
 exactly the map's Jacobian on its face, so qc is 1 by construction and flips are 0. The geodesic
 columns use the conforming vertex version of the map (``MidedgeMap.vertex_uv``) without the cut face.
 A source whose neighbourhood maps to less than one grid cell cannot be seeded: such sources are
@@ -55,9 +55,9 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 from core.errors import ConformalError                                   # noqa: E402
-from core.flatten import flatten                                         # noqa: E402
-from core.measures import conformal_factor, uv_measures                  # noqa: E402
-from core.midedge import (RestrictedFamily, lp_restricted, map_measures,  # noqa: E402
+from core.disk.flatten import flatten                                         # noqa: E402
+from core.mesh.measures import conformal_factor, uv_measures                  # noqa: E402
+from core.disk.midedge import (RestrictedFamily, lp_restricted, map_measures,  # noqa: E402
                           midedge_map, optimise_restricted)
 from core.surfaces import make_surface                                   # noqa: E402
 
@@ -72,7 +72,7 @@ PAPER = {  # the paper's reported values, for the comparison table
 def geodesic_errors(V, F, uv, ref, grid):
     """Relative errors of fast marching on the map ``uv`` (n,2) over triangles ``F``, against ``ref``
     (npz with ``sources`` and ``dist``). Returns (mean, max, failed sources)."""
-    from core.geodesic import geodesic_distance
+    from core.geodesic.solver import geodesic_distance
     errs, failed = [], 0
     for s, d in zip(ref['sources'], ref['dist']):
         try:
@@ -202,10 +202,10 @@ def main():
     V, F = make_surface('bump', n)
     ref_path = os.path.join(ROOT, 'tests', 'data', f'geodesic_ref_bump_{n}.npz')
     ref = np.load(ref_path) if os.path.exists(ref_path) else None
-    have_geo = importlib.util.find_spec('core.geodesic') is not None
+    have_geo = importlib.util.find_spec('core.geodesic.solver') is not None
     print(f"bump, n = {n} ({len(V)} vertices, {len(F)} triangles); geodesic grid {args.grid}"
           + ("" if ref is not None else f"; no reference {os.path.basename(ref_path)}: no geodesic columns")
-          + ("" if have_geo else "; core.geodesic missing: no geodesic columns"))
+          + ("" if have_geo else "; core.geodesic.solver missing: no geodesic columns"))
     if not have_geo:
         ref = None
     rows, figmaps, conforming = [], {}, {}

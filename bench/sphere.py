@@ -6,7 +6,7 @@ mesh.
 
 Meshes: an icosphere, spot and cheburashka (tests/data, read by ``v`` index), spot subdivided once
 and twice (flat midpoint split: the same surface), and star-shaped blobs with protrusions
-(``core.sphere.blob``). Columns are min/max mu over the triangles (DESIGN.md section 3; over the
+(``core.surfaces.blob``). Columns are min/max mu over the triangles (DESIGN.md section 3; over the
 oriented ones when the map folds some) for the four
 Moebius modes, the gain of ``uniform`` over the better of centring and mean |log area|, and for the
 ``uniform`` map p1/p99, qc_mean, flips and seconds (map + Moebius; wall clock on a shared 2-core
@@ -22,9 +22,10 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from core.sphere import sphere_map, icosphere, blob, subdivide, conformal_sphere, sphere_measures  # noqa: E402
-from core.moebius import optimise  # noqa: E402
-from core.geometry import face_areas, corner_angles  # noqa: E402
+from core.sphere.map import sphere_map, conformal_sphere, sphere_measures  # noqa: E402
+from core.surfaces import icosphere, blob, subdivide  # noqa: E402
+from core.sphere.moebius import optimise  # noqa: E402
+from core.mesh.geometry import face_areas, corner_angles  # noqa: E402
 
 SHAPES = {
     'blob-4bumps': dict(),
@@ -73,7 +74,7 @@ def row(name, V, F):
 def geodesic_tables(quick):
     """Geodesic distances through the sphere: the icosphere against great circles, and closed meshes
     against exact polyhedral distances (pygeodesic, a dev dependency) for three Moebius choices."""
-    from core.sphere import sphere_geodesic, default_sphere_grid
+    from core.sphere.geodesic import sphere_geodesic, default_sphere_grid
     print('\n## geodesic distances through the sphere (two stereographic charts, fast marching)\n')
     print('| mesh | map | source | grid | mean rel. error | max rel. error | buckets | seconds |')
     print('|---|---|---|---|---|---|---|---|')

@@ -18,9 +18,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from core.geometry import face_areas          # noqa: E402
-from core.moebius import exact_ratio          # noqa: E402
-from core.sphere import blob, conformal_sphere, sphere_map   # noqa: E402
+from core.mesh.geometry import face_areas          # noqa: E402
+from core.sphere.moebius import exact_ratio          # noqa: E402
+from core.surfaces import blob   # noqa: E402
+from core.sphere.map import conformal_sphere, sphere_map   # noqa: E402
 from sphere import SHAPES, _data              # noqa: E402
 
 

@@ -43,7 +43,7 @@ from scipy.interpolate import BSpline
 from scipy.optimize import least_squares
 
 from .errors import ConformalError
-from .objio import text_lines
+from .io.obj import text_lines
 
 SEED_RADIUS = 5.5        # source seed disk radius, in grid cells (DESIGN.md section 4, step 2);
                          # not an integer, so grid nodes rarely sit exactly on the seed circle
@@ -117,7 +117,7 @@ def make_grid(uv, F, mu_vertex, cells=DEFAULT_CELLS):
     positive conformal factor per vertex (UV units per surface unit); ``cells`` grid cells along the
     longer side of the UV bounding box (plus two nodes of margin on each side). Rasterisation is
     ``core.geodesic.Grid``'s."""
-    from .geodesic import Grid, GRID_MIN
+    from .geodesic.solver import Grid, GRID_MIN
     cells = int(cells)
     if cells + 5 < GRID_MIN:
         raise ConformalError(f"grid size must be at least {GRID_MIN - 5} cells, got {cells}")
@@ -248,7 +248,7 @@ def march(grid, w, src, solver='auto'):
     to the rim at their exact times (no point-source offset), and adds ``tau`` back; 'sweep' runs
     ``core.eikonal`` (pure numpy) from the fixed seed times; 'auto' picks scikit-fmm if it imports.
     Also returns the bool (ny,nx) mask of seed nodes (inside the disk or next to it)."""
-    from .geodesic import calibrate_phi, march as eikonal_march
+    from .geodesic.solver import calibrate_phi, march as eikonal_march
     solver = _solver(solver)
     x, y = grid.coords()
     h = grid.h
@@ -493,7 +493,7 @@ class MetricResult:
 
 def vertex_areas(V, F):
     """Barycentric vertex areas (n,): a third of each adjacent triangle's area."""
-    from .geometry import face_areas
+    from .mesh.geometry import face_areas
     return np.bincount(F.ravel(), np.repeat(face_areas(V, F) / 3.0, 3), minlength=len(V))
 
 
@@ -501,7 +501,7 @@ def vertex_mu(V, F, uv):
     """Per-vertex conformal factor (n,) of the map ``uv`` (UV units per surface unit): the realised
     per-triangle scale ``sqrt(A_uv / A_3d)`` averaged over each vertex's triangles in log, weighted by
     area (``core.geodesic``)."""
-    from .geodesic import face_mu, vertex_mu as average
+    from .geodesic.solver import face_mu, vertex_mu as average
     return average(V, F, face_mu(V, F, uv))
 
 
@@ -544,7 +544,7 @@ def reconstruct(V, F, sources, sensors, times, boundary='uniform', cells=DEFAULT
     of the Dirichlet and thin-plate terms of ``log xi`` (see the module docstring); raise ``noise``
     for noisy measurements. ``solver``: eikonal solver, 'auto', 'skfmm' or 'sweep' (pure numpy).
     Returns ``MetricResult`` with ``xi`` (n,)."""
-    from .flatten import flatten
+    from .disk.flatten import flatten
     t0 = time.perf_counter()
     report_progress = progress or (lambda f, msg: None)
     V = np.asarray(V, np.float64)
@@ -590,7 +590,7 @@ def simulate_times(V, F, xi, sources, sensors, boundary='uniform', cells=4 * DEF
     """Forward model: travel times (k,) between vertex pairs ``sources[i]``, ``sensors[i]`` (k,) for
     the per-vertex metric ``xi`` (n,) on the disk mesh ``V`` (n,3), ``F`` (m,3), by fast marching on a
     ``cells`` grid over the conformal plane. ``flat``: an existing true-scale ``FlattenResult``."""
-    from .flatten import flatten
+    from .disk.flatten import flatten
     V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64)
     xi = np.asarray(xi, np.float64)

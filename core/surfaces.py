@@ -38,3 +38,73 @@ def make_surface(name, n):
     Z = SURFACES[name](X, Y)
     V = np.stack([X.ravel(), Y.ravel(), Z.ravel()], 1).astype(np.float64)
     return V, grid_faces(n)
+
+
+# --- closed test shapes (sphere mode) --------------------------------------------------------------------------------------
+def icosphere(freq=8):
+    """Geodesic sphere: each icosahedron face split into ``freq**2`` triangles, projected to the unit
+    sphere. Returns ``V`` (10 freq^2 + 2, 3) and ``F`` (20 freq^2, 3), counter-clockwise seen from
+    outside."""
+    k = int(freq)
+    if k < 1:
+        raise ConformalError("icosphere frequency must be at least 1")
+    g = (1 + 5 ** 0.5) / 2
+    P = np.array([[-1, g, 0], [1, g, 0], [-1, -g, 0], [1, -g, 0], [0, -1, g], [0, 1, g],
+                  [0, -1, -g], [0, 1, -g], [g, 0, -1], [g, 0, 1], [-g, 0, -1], [-g, 0, 1]], float)
+    T = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+                  [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    ii, jj = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing='ij')
+    keep = ii + jj <= k
+    ii, jj = ii[keep], jj[keep]
+    idx = -np.ones((k + 1, k + 1), np.int64)
+    idx[ii, jj] = np.arange(len(ii))
+    a, b = np.meshgrid(np.arange(k), np.arange(k), indexing='ij')
+    up = a + b <= k - 1
+    dn = a + b <= k - 2
+    loc = np.r_[np.stack([idx[a[up], b[up]], idx[a[up] + 1, b[up]], idx[a[up], b[up] + 1]], 1),
+                np.stack([idx[a[dn] + 1, b[dn]], idx[a[dn] + 1, b[dn] + 1], idx[a[dn], b[dn] + 1]], 1)]
+    w = np.stack([k - ii - jj, ii, jj], 1) / k
+    pts = np.einsum('pk,fkd->fpd', w, P[T]).reshape(-1, 3)
+    faces = (loc[None] + (np.arange(len(T)) * len(ii))[:, None, None]).reshape(-1, 3)
+    pts /= np.linalg.norm(pts, axis=1)[:, None]
+    _, first, inv = np.unique(np.round(pts, 9), axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    V = pts[first[order]]
+    F = rank[inv.ravel()][faces]
+    nrm = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    out = (nrm * V[F].mean(1)).sum(1) < 0
+    F[out] = F[out][:, ::-1]
+    return V, F
+
+
+def blob(freq=24, bumps=((0, 0, 1, 1.2), (1, 0, 0, 0.8), (0, -1, 0, 1.0), (-0.6, 0.6, -0.5, 0.9)),
+         width=0.12):
+    """Star-shaped sphere with protrusions: the icosphere scaled radially by ``1 + sum h_k exp(-(1 -
+    d_k . x) / width)`` for bumps ``(dx, dy, dz, h)``. Returns ``V``, ``F`` like ``icosphere``."""
+    V, F = icosphere(freq)
+    r = np.ones(len(V))
+    for dx, dy, dz, h in bumps:
+        d = np.array([dx, dy, dz], float)
+        d /= np.linalg.norm(d)
+        r += h * np.exp(-(1.0 - V @ d) / width)
+    return V * r[:, None], F
+
+
+def subdivide(V, F):
+    """Split every triangle into 4 at its edge midpoints (flat: the surface does not move). Returns
+    ``V2`` (n + e, 3) and ``F2`` (4m, 3); the first n vertices are the input's."""
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    n = len(V)
+    E = np.sort(np.stack([F, F[:, [1, 2, 0]]], 2).reshape(-1, 2), 1)
+    key, inv = np.unique(E[:, 0] * n + E[:, 1], return_inverse=True)
+    mid = n + inv.reshape(-1, 3)             # midpoint of edge (k, k+1) of each face
+    V2 = np.vstack([V, 0.5 * (V[key // n] + V[key % n])])
+    a, b, c = F.T
+    ab, bc, ca = mid.T
+    F2 = np.vstack([np.stack([a, ab, ca], 1), np.stack([ab, b, bc], 1), np.stack([ca, bc, c], 1),
+                    np.stack([ab, bc, ca], 1)])
+    return V2, F2

@@ -12,9 +12,9 @@ N = 25          # bump grid size: 1152 triangles, fast enough to run every mode
 
 
 def core_of(pkg):
-    from conformal_flatten.core.flatten import flatten
+    from conformal_flatten.core.disk.flatten import flatten
     from conformal_flatten.core.surfaces import make_surface
-    from conformal_flatten.core.triangulate import triangulate
+    from conformal_flatten.core.mesh.triangulate import triangulate
     return flatten, make_surface, triangulate
 
 
@@ -125,7 +125,7 @@ def test_bump_uvs_match_core(addon, bl, boundary):
 
 
 def test_true_scale_area(addon, bl):
-    from conformal_flatten.core.geometry import face_areas
+    from conformal_flatten.core.mesh.geometry import face_areas
     obj, V, F = bump_object(bl)
     bpy.ops.uv.conformal_flatten(boundary='AREA', fit='TRUE_SCALE', bake=False)
     me = obj.data
@@ -168,7 +168,7 @@ def test_quads_and_ngon(addon, bl):
 
 def test_attributes_domain_type_range(addon, bl):
     from conformal_flatten.addon.colormap import colormap
-    from conformal_flatten.core.geometry import face_areas
+    from conformal_flatten.core.mesh.geometry import face_areas
     obj, V, F = bump_object(bl)
     bpy.ops.uv.conformal_flatten(boundary='AREA')
     me = obj.data

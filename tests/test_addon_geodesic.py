@@ -53,7 +53,7 @@ def test_operator_registered_with_flags(addon):
 
 
 def test_attributes_written_and_in_range_edit_selection(addon, bl):
-    from conformal_flatten.core.geodesic import geodesic_distance
+    from conformal_flatten.core.geodesic.solver import geodesic_distance
     obj, V, F = bump_object(bl)
     src = [0, (N // 2) * N + N // 2]
     select_vertices(obj, src)
@@ -142,7 +142,7 @@ def test_reuses_the_flatten_operators_map(addon, bl):
     assert bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA') == {'FINISHED'}
     assert report_of(me)['flattening'] == 'flatten operator'
     d = point_attr(me, 'geodesic_distance')
-    from conformal_flatten.core.geodesic import geodesic_distance
+    from conformal_flatten.core.geodesic.solver import geodesic_distance
     ref, _ = geodesic_distance(V, F, [int(np.argmin(d))], boundary='area', grid=256)
     np.testing.assert_allclose(d, ref, rtol=1e-4, atol=1e-4)
 
@@ -161,7 +161,6 @@ def test_bands_change_only_the_colours(addon, bl):
 
 
 def test_failure_leaves_the_mesh_untouched(addon, bl):
-    from conformal_flatten.core.surfaces import make_surface
     # a closed surface cannot be flattened as a disk
     bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
     obj = bpy.context.active_object

@@ -54,8 +54,8 @@ def islands_of(me, faces=None):
     """Triangles of the mesh (core triangulation), their corner loops, and the island of each, cut
     along the mesh's seams (restricted to the polygons ``faces``, (p,) bool, if given). Returns
     (V, F (m,3) vertex ids, tri_loops (m,3), island (m,), tri_poly (m,))."""
-    from conformal_flatten.core.islands import cut_along_seams
-    from conformal_flatten.core.triangulate import triangulate
+    from conformal_flatten.core.atlas.islands import cut_along_seams
+    from conformal_flatten.core.mesh.triangulate import triangulate
     V, cv, sizes, E, seam = mesh_arrays(me)
     tri, tri_poly = triangulate(cv, sizes, V)
     if faces is not None:
@@ -80,7 +80,7 @@ def signed_areas(W):
 
 def island_measures(V, F, W):
     """core measures of one island given as a triangle soup: V[F] positions, W (m,3,2) UVs."""
-    from conformal_flatten.core.measures import uv_measures
+    from conformal_flatten.core.mesh.measures import uv_measures
     m = len(F)
     return uv_measures(V[F].reshape(-1, 3), np.arange(3 * m).reshape(m, 3), W.reshape(-1, 2).astype(float))
 
@@ -382,7 +382,7 @@ def test_edit_mode_selection_leaves_other_uvs_bitwise(addon, bl, packer):
 
 
 def test_edit_mode_selection_single_disk(addon, bl):
-    """A selection that is one disk without seams: flattened directly (core.flatten), fitted to the
+    """A selection that is one disk without seams: flattened directly (core.disk.flatten), fitted to the
     unit square; the rest untouched; the baked mu is new on the selection's vertices only."""
     from conformal_flatten.core.surfaces import make_surface
     V, F = make_surface('bump', 17)

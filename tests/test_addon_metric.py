@@ -16,7 +16,7 @@ def flat_object(bl, name='flat'):
 
 
 def boundary_pairs(V, F):
-    from conformal_flatten.core.topology import boundary_loops
+    from conformal_flatten.core.mesh.topology import boundary_loops
     loop = boundary_loops(F, len(V))[0]
     S, T = np.meshgrid(loop[::12], loop[6::12], indexing='ij')
     return S.ravel(), T.ravel()

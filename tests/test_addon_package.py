@@ -31,7 +31,7 @@ def test_zip_layout_and_manifest(built_zip):
         names = z.namelist()
         manifest = tomllib.loads(z.read('blender_manifest.toml').decode())
     assert '__init__.py' in names                     # register() at the zip root, next to the manifest
-    assert 'addon/ops_flatten.py' in names and 'core/flatten.py' in names
+    assert 'addon/ops_flatten.py' in names and 'core/disk/flatten.py' in names
     assert not any(n.startswith(('tests/', 'bench/', 'tools/', 'docs/', '.venv/')) for n in names)
     assert not any('__pycache__' in n for n in names)
     assert manifest['id'] == 'conformal_flatten'

@@ -7,7 +7,7 @@ import pytest
 
 
 def closed_object(bl, freq=6, name='blob'):
-    from conformal_flatten.core.sphere import blob
+    from conformal_flatten.core.surfaces import blob
     V, F = blob(freq, bumps=((0, 0, 1, 1.0), (1, 0, 0, 0.6)), width=0.15)
     V = V.astype(np.float32).astype(float)
     return bl.mesh_object(name, V, F), V, F
@@ -41,8 +41,8 @@ def test_registered_with_flags(addon):
 
 
 def test_sphere_operator_writes_everything(addon, bl):
-    from conformal_flatten.core.sphere import sphere_map
-    from conformal_flatten.core.geometry import face_areas
+    from conformal_flatten.core.sphere.map import sphere_map
+    from conformal_flatten.core.mesh.geometry import face_areas
     obj, V, F = closed_object(bl)
     me = obj.data
     assert bpy.ops.uv.conformal_sphere(moebius='UNIFORM', bake=True) == {'FINISHED'}
@@ -134,7 +134,7 @@ def test_torus_error(addon, bl):
 
 def test_spherical_uv_seam_and_poles():
     from conformal_flatten.addon.ops_sphere import spherical_uv, pole_rotation
-    from conformal_flatten.core.sphere import icosphere
+    from conformal_flatten.core.surfaces import icosphere
     V, F = icosphere(4)
     R = pole_rotation(V, 7)
     S = V @ R.T

@@ -1,13 +1,12 @@
 """``python -m core flatten`` and ``make-surface``: outputs, JSON report, errors."""
 import json
-import os
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
-from core.measures import uv_measures
+from core.mesh.measures import uv_measures
 from conftest import ROOT
 
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from core import ConformalError, flatten, make_surface, uv_measures
-from core.objio import read_obj
+from core.io.obj import read_obj
 from conftest import DATA
 
 # issue 2 acceptance floors at n = 65: (mu_ratio floor, qc_mean ceiling). The mu floors are also above

@@ -9,12 +9,12 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from meshgen import grid
 from core.errors import ConformalError
-from core.flatten import flatten
-from core.islands import cut_along_seams, unwrap
-from core.objio import read_obj
-from core.triangulate import triangulate
-from core.validate import check_mesh
-from core import topology
+from core.disk.flatten import flatten
+from core.atlas.islands import cut_along_seams, unwrap
+from core.io.obj import read_obj
+from core.mesh.triangulate import triangulate
+from core.mesh.validate import check_mesh
+from core.mesh import topology
 
 FUZZ = settings(derandomize=True, database=None, deadline=None,
                 max_examples=int(os.environ.get('CF_FUZZ_EXAMPLES', 60)),

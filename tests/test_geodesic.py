@@ -1,4 +1,4 @@
-"""Geodesic distance by fast marching on the conformal plane (core.geodesic, core.eikonal, CLI).
+"""Geodesic distance by fast marching on the conformal plane (core.geodesic.solver, core.geodesic.eikonal, CLI).
 
 Exact references: tests/data/geodesic_ref_*.npz (pygeodesic exact MMP, bench/make_refdata.py)."""
 import os
@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from conftest import DATA
-from core import geodesic as geo
+from core.geodesic import solver as geo
 from core.cli import main
-from core.eikonal import sweep, travel_time
+from core.geodesic.eikonal import sweep, travel_time
 from core.errors import ConformalError
-from core.flatten import flatten
-from core.objio import write_obj
+from core.disk.flatten import flatten
+from core.io.obj import write_obj
 from core.surfaces import make_surface
 
 

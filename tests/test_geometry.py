@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from core.geometry import angle_sums, corner_angles, face_areas
-from core.laplacian import cotan_laplacian, face_gradients, gradient, divergence
+from core.mesh.geometry import angle_sums, corner_angles, face_areas
+from core.mesh.laplacian import cotan_laplacian, face_gradients, gradient, divergence
 from core.surfaces import make_surface
-from core.topology import boundary_loops, euler_characteristic
-from core.validate import check_mesh
+from core.mesh.topology import boundary_loops, euler_characteristic
+from core.mesh.validate import check_mesh
 
 
 def octahedron():
@@ -72,3 +72,18 @@ def test_boundary_loop_orientation():
     P = V[loop, :2]
     signed = 0.5 * np.sum(P[:, 0] * np.roll(P[:, 1], -1) - np.roll(P[:, 0], -1) * P[:, 1])
     assert len(loop) == 16 and signed > 0        # counter-clockwise, surface on the left
+
+
+def test_signed_uv_areas_and_vertex_mu():
+    from core.mesh.measures import signed_uv_areas, vertex_mu
+    uv = np.array([[0.0, 0], [2, 0], [0, 1], [2, 1]])
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    assert np.allclose(signed_uv_areas(uv, F), [1.0, 1.0])
+    assert np.allclose(signed_uv_areas(uv, F[:, ::-1]), [-1.0, -1.0])
+    # geometric mean weighted by area; a NaN triangle is left out; an unused vertex is NaN
+    mu = vertex_mu(F, np.array([1.0, 4.0]), np.array([1.0, 3.0]), 5)
+    assert mu[0] == pytest.approx(1.0) and mu[3] == pytest.approx(4.0)
+    assert mu[1] == pytest.approx(np.exp(0.75 * np.log(4.0)))
+    assert np.isnan(mu[4])
+    mu = vertex_mu(F, np.array([np.nan, 4.0]), np.array([1.0, 3.0]), 4)
+    assert np.isnan(mu[0]) and mu[1] == pytest.approx(4.0)

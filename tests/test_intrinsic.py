@@ -6,6 +6,8 @@ import pytest
 import scipy.sparse as sp
 from scipy.spatial import Delaunay
 
+from core.errors import ConformalError
+
 from core.mesh.intrinsic import (IntrinsicTriangulation, corner_angles, edge_lengths_3d, face_areas,
                                  intrinsic_delaunay, layout, mollify)
 
@@ -255,11 +257,11 @@ def test_several_components_and_errors():
     T = intrinsic_delaunay(V, F)
     assert T.report['converged']
     assert interior_weights(T).min() >= -1e-12
-    with pytest.raises(ValueError):
+    with pytest.raises(ConformalError):
         intrinsic_delaunay(V1, np.concatenate([F1, F1[:1]]))          # an edge with 3 faces
     bad = F1.copy()
     bad[0] = bad[0, ::-1]
-    with pytest.raises(ValueError):
+    with pytest.raises(ConformalError):
         intrinsic_delaunay(V1, bad)
     assert isinstance(T, IntrinsicTriangulation)
 

@@ -7,15 +7,15 @@ import pytest
 
 from conftest import DATA
 from meshgen import coverage, grid, two_holes, uv_sphere
-from core import topology
+from core.mesh import topology
 from core.cli import main
 from core.errors import ConformalError
-from core.geometry import face_areas
-from core.islands import (boundary_crossings, cut_along_seams, fill_holes, seams_from_corner_ids,
+from core.mesh.geometry import face_areas
+from core.atlas.islands import (boundary_crossings, cut_along_seams, fill_holes, seams_from_corner_ids,
                           shelf_pack, unwrap)
-from core.measures import uv_measures
-from core.objio import read_obj
-from core.triangulate import triangulate
+from core.mesh.measures import uv_measures
+from core.io.obj import read_obj
+from core.mesh.triangulate import triangulate
 
 
 def uv_area(uv, F):

@@ -10,10 +10,10 @@ import pytest
 from conftest import DATA, ROOT
 from core import metric
 from core.errors import ConformalError
-from core.flatten import flatten
-from core.objio import write_obj
+from core.disk.flatten import flatten
+from core.io.obj import write_obj
 from core.surfaces import make_surface
-from core.topology import boundary_loops
+from core.mesh.topology import boundary_loops
 
 
 def _pairs(src, sns):
@@ -226,7 +226,7 @@ def test_cli_demo_small_json():
 
 
 def test_sweep_solver_agrees_with_fast_marching(flat17):
-    """The pure-numpy fallback (core.eikonal) and scikit-fmm give the same travel times through a
+    """The pure-numpy fallback (core.geodesic.eikonal) and scikit-fmm give the same travel times through a
     variable weight field, so the reconstruction works without scikit-fmm."""
     V, F, loop = flat17
     flat = flatten(V, F, boundary='area', fit='true_scale')
@@ -261,7 +261,7 @@ def test_simulate_times_match_exact_geodesics():
 def test_any_disk_mesh_with_interior_points():
     """A scanned planar disk with a ragged, non-convex outline (woody.obj), boundary and interior
     sources and sensors, a smooth metric with synthetic times on a finer grid."""
-    from core.objio import read_obj
+    from core.io.obj import read_obj
     mesh = read_obj(os.path.join(DATA, 'woody.obj'))
     F, _ = mesh.triangles()
     V = mesh.V

@@ -1,14 +1,14 @@
-"""Polthier's midedge conformal map and the paper's restricted boundary family (core.midedge)."""
+"""Polthier's midedge conformal map and the paper's restricted boundary family (core.disk.midedge)."""
 import numpy as np
 import pytest
 
 from core.errors import ConformalError
-from core.laplacian import face_gradients, gradient
-from core.measures import uv_measures
-from core.midedge import (RestrictedFamily, conjugate_midedge, cr_gradient, lp_restricted,
+from core.mesh.laplacian import face_gradients, gradient
+from core.mesh.measures import uv_measures
+from core.disk.midedge import (RestrictedFamily, conjugate_midedge, cr_gradient, lp_restricted,
                           map_measures, midedge_edges, midedge_map, optimise_restricted,
                           restricted_map)
-from core.sphere import icosphere
+from core.surfaces import icosphere
 from core.surfaces import make_surface
 
 

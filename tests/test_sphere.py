@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from core.errors import ConformalError
-from core.geometry import face_areas
-from core import moebius
-from core.sphere import (sphere_map, conformal_sphere, sphere_measures, icosphere, blob, subdivide,
-                         to_sphere, from_sphere)
+from core.mesh.geometry import face_areas
+from core.sphere import moebius
+from core.sphere.map import sphere_map, conformal_sphere, sphere_measures, to_sphere, from_sphere
+from core.surfaces import icosphere, blob, subdivide
 
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'data')
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -103,7 +103,7 @@ def test_icosphere_maps_to_itself():
     r = res.report
     assert r['flips'] == 0 and r['qc_mean'] <= 1.005 and r['mu_ratio'] > 0.98
     # the map is a rotation of the identity: corner angles are kept
-    from core.geometry import corner_angles
+    from core.mesh.geometry import corner_angles
     assert np.abs(corner_angles(res.S, F) - corner_angles(V, F)).max() < 0.02
     assert np.allclose(np.linalg.norm(res.S, axis=1), 1)
 
@@ -145,7 +145,7 @@ def test_center_mode_centres_the_area_centroid():
 
 def test_cheburashka_needles():
     V, F = _load('cheburashka')
-    from core.geometry import corner_angles
+    from core.mesh.geometry import corner_angles
     assert np.degrees(corner_angles(V, F)).max() > 170
     res = sphere_map(V, F, moebius='uniform')
     r = res.report
@@ -173,7 +173,7 @@ def test_tiny_meshes():
 
 
 def test_cli(tmp_path):
-    from core.objio import write_obj, read_obj
+    from core.io.obj import write_obj, read_obj
     V, F = blob(5)
     src, out = tmp_path / 'in.obj', tmp_path / 'out.obj'
     write_obj(str(src), V, F)
@@ -202,7 +202,7 @@ def _great_circle(V, s):
 
 
 def test_geodesic_icosphere_great_circles():
-    from core.sphere import sphere_geodesic
+    from core.sphere.geodesic import sphere_geodesic
     V, F = icosphere(10)
     for s in (0, 500, int(np.argmin(V[:, 2]))):          # on the equator, anywhere, at a pole
         d, rep = sphere_geodesic(V, F, [s], S=V)
@@ -219,7 +219,7 @@ def test_geodesic_icosphere_great_circles():
 
 
 def test_geodesic_through_the_computed_map_in_mesh_units():
-    from core.sphere import sphere_geodesic
+    from core.sphere.geodesic import sphere_geodesic
     V, F = icosphere(8)
     W = 3.0 * V                                          # radius 3: distances scale, the map does not care
     d, rep = sphere_geodesic(W, F, [17])                 # maps with moebius='uniform' itself
@@ -230,7 +230,7 @@ def test_geodesic_through_the_computed_map_in_mesh_units():
 
 
 def test_geodesic_numpy_sweep_fallback():
-    from core.sphere import sphere_geodesic
+    from core.sphere.geodesic import sphere_geodesic
     V, F = icosphere(5)
     d, rep = sphere_geodesic(V, F, [3], S=V, grid=96, solver='sweep')
     gc = _great_circle(V, 3)
@@ -240,7 +240,7 @@ def test_geodesic_numpy_sweep_fallback():
 
 
 def test_geodesic_bad_sources():
-    from core.sphere import sphere_geodesic
+    from core.sphere.geodesic import sphere_geodesic
     V, F = icosphere(3)
     with pytest.raises(ConformalError, match='source'):
         sphere_geodesic(V, F, [len(V)], S=V)

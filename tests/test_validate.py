@@ -12,9 +12,9 @@ from conftest import ROOT
 from meshgen import grid, needle_mesh, torus, two_holes, uv_sphere
 from core.cli import main
 from core.errors import ConformalError
-from core.flatten import flatten
-from core.islands import unwrap
-from core.validate import check_mesh, check_loose_edges
+from core.disk.flatten import flatten
+from core.atlas.islands import unwrap
+from core.mesh.validate import check_mesh, check_loose_edges
 
 PY = sys.executable
 
@@ -283,7 +283,7 @@ def test_quad_meshes_keep_their_defects_visible():
     """Triangulating quads must neither hide a duplicate polygon nor invent one: a repeated quad
     (in either orientation) is reported as a duplicate face, while two quads sharing two edges (a
     vertex of valence 2, as in Suzanne's brows) triangulate without duplicates."""
-    from core.triangulate import triangulate
+    from core.mesh.triangulate import triangulate
     V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0.5, 0], [-1, 0.5, 0]], float)
     for dup in ([2, 3, 0, 1], [3, 2, 1, 0]):
         cv = np.array([0, 1, 2, 3] + dup)
@@ -295,5 +295,22 @@ def test_quad_meshes_keep_their_defects_visible():
     cv = np.array([0, 1, 2, 3, 0, 4, 2, 1])
     tri, _ = triangulate(cv, [4, 4], V2)
     F = cv[tri]
-    from core import topology
+    from core.mesh import topology
     assert len(topology.duplicate_rows(F)) == 0 and topology.unique_edges(F)[1].max() <= 2
+
+
+def test_errors_carry_code_and_remedy():
+    """A ConformalError names its kind and remedy as data; str() is the core's wording of both."""
+    from core.errors import REMEDIES
+    V, F = _grid()
+    with pytest.raises(ConformalError) as err:
+        flatten(V, F, boundary='area', max_faces=10)
+    exc = err.value
+    assert exc.code == 'too_large' and exc.remedy == 'raise_limit'
+    assert str(exc) == f"{exc.problem}: {REMEDIES['raise_limit']}"
+    closed = np.vstack([F, F[:, ::-1] + 0])        # not a disk: duplicate reversed faces
+    with pytest.raises(ConformalError) as err:
+        flatten(V, closed, boundary='area')
+    assert err.value.code in ('bad_topology', 'no_boundary')
+    with pytest.raises(KeyError):
+        ConformalError("x", code='no_such_code')

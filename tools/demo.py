@@ -195,7 +195,7 @@ def main(argv=None):
     pkg = devpkg.load()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     pkg.register()
-    from conformal_flatten.core.objio import write_obj
+    from conformal_flatten.core.io.obj import write_obj
     from conformal_flatten.core.surfaces import make_surface
     from conformal_flatten.addon import meshio
     from conformal_flatten.addon.colormap import colormap, linear_to_srgb, normalise
@@ -230,7 +230,7 @@ def main(argv=None):
     engines['mu.png'] = render(sc, os.path.join(out, 'mu.png'), 'VERTEX')
     checker_material(obj, os.path.join(out, 'checker_texture.png'))
     engines['checker.png'] = render(sc, os.path.join(out, 'checker.png'), 'TEXTURE')
-    from conformal_flatten.core.measures import conformal_factor
+    from conformal_flatten.core.mesh.measures import conformal_factor
     mu_t = conformal_factor(md.V, md.F, uv_vert)              # realised per-triangle mu
     lo, hi = me['conformal_factor_range']
     rgb = linear_to_srgb(colormap(normalise(mu_t, mu_t.min(), mu_t.max(), log=True))[:, :3])

@@ -43,6 +43,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ..errors import ConformalError
+
 _NEXT = np.array([1, 2, 0])
 _PREV = np.array([2, 0, 1])
 
@@ -143,9 +145,9 @@ def _build_edges(F, n):
     key = lo * np.int64(n) + hi
     uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
     if np.any(cnt > 2):
-        raise ValueError('non-manifold edge: %d edges have more than two faces' % int(np.sum(cnt > 2)))
+        raise ConformalError(f'{int(np.sum(cnt > 2))} non-manifold edges have more than two faces', 'bad_topology')
     if np.any(u == v):
-        raise ValueError('a face uses the same vertex twice')
+        raise ConformalError('a face uses the same vertex twice', 'degenerate')
     E = len(uniq)
     FE = inv.reshape(m, 3).astype(np.int64)
     order = np.argsort(inv, kind='stable')
@@ -161,7 +163,7 @@ def _build_edges(F, n):
     e1 = inv[h1]
     g0 = h0[np.searchsorted(inv[h0], e1)] if len(h1) else h0[:0]
     if np.any(u[h1] != v[g0]):
-        raise ValueError('faces are not consistently oriented')
+        raise ConformalError('faces are not consistently oriented', 'bad_topology')
     return FE, EF, EC
 
 

@@ -7,7 +7,7 @@ This is the same minimiser as the least-squares formulation Blender's 'Conformal
 import numpy as np
 import scipy.sparse as sp
 
-from .solve import Factor
+from ..mesh.solve import Factor
 
 
 def conformal_energy_matrix(L, loop):

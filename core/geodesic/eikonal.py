@@ -12,7 +12,7 @@ operation: a sweep is a Python loop over ``ny + nx`` diagonals, not over nodes.
 """
 import numpy as np
 
-from .errors import ConformalError
+from ..errors import ConformalError
 
 PAD = 2
 

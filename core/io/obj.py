@@ -7,8 +7,8 @@ import tempfile
 
 import numpy as np
 
-from .errors import ConformalError
-from .triangulate import triangulate
+from ..errors import ConformalError
+from ..mesh.triangulate import triangulate
 
 
 class ObjMesh:

@@ -22,8 +22,8 @@ import numpy as np
 from scipy.optimize import linprog
 import scipy.sparse as sp
 
-from .errors import ConformalError
-from .measures import singular_values
+from ..errors import ConformalError
+from ..mesh.measures import singular_values
 
 
 def _qc_mean(system, uv, keep=slice(None)):

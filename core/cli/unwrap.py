@@ -9,12 +9,12 @@ import sys
 
 import numpy as np
 
-from .errors import ConformalError
-from .flatten import BOUNDARY_MODES
-from .islands import FITS, HOLE_MODES, ISLAND_SCALES, seams_from_corner_ids, unwrap
-from .objio import text_lines, read_obj, write_obj
-from .triangulate import triangulate
-from .validate import DEFAULT_MAX_FACES
+from ..errors import ConformalError
+from ..disk.flatten import BOUNDARY_MODES
+from ..atlas.islands import FITS, HOLE_MODES, ISLAND_SCALES, seams_from_corner_ids, unwrap
+from ..io.obj import text_lines, read_obj, write_obj
+from ..mesh.triangulate import triangulate
+from ..mesh.validate import DEFAULT_MAX_FACES
 
 
 def add_arguments(p):

@@ -3,8 +3,8 @@ import json
 
 import numpy as np
 
-from .flatten import BOUNDARY_MODES, FIT_MODES, flatten
-from .objio import read_obj, write_obj
+from ..disk.flatten import BOUNDARY_MODES, FIT_MODES, flatten
+from ..io.obj import read_obj, write_obj
 
 
 def add_arguments(p):

@@ -20,14 +20,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import ConformalError
-from .geometry import angle_sums, face_areas
-from .laplacian import cotan_laplacian, face_gradients, gradient, divergence
-from .measures import local_frames, jacobians_from_frames, measures_from_jacobians
-from .solve import Factor, factor_all
+from ..errors import ConformalError
+from ..mesh.geometry import angle_sums, face_areas
+from ..mesh.laplacian import cotan_laplacian, face_gradients, gradient, divergence
+from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians
+from ..mesh.solve import Factor, factor_all
 from .lscm import lscm
 from .uniform import optimise, vertex_bound
-from .validate import check_mesh, normalise_scale, DEFAULT_MAX_FACES
+from ..mesh.validate import check_mesh, normalise_scale, DEFAULT_MAX_FACES
 
 BOUNDARY_MODES = ('free', 'area', 'uniform')
 FIT_MODES = ('true_scale', 'unit_square')
@@ -110,7 +110,7 @@ class DiskSystem:
         kt = self.k + (self.L @ u)[self.B]
         if abs(kt.sum() - 2 * np.pi) > 1e-6 * max(1.0, np.abs(kt).sum()):
             raise ConformalError(f"target boundary curvature sums to {kt.sum():.6f}, not 2*pi: "
-                                 "the mesh is not a topological disk")
+                                 "the mesh is not a topological disk", 'bad_topology')
         lt = np.exp(0.5 * (uB + np.roll(uB, -1))) * self.l
         phi = np.cumsum(kt)
         T = np.stack([np.cos(phi), np.sin(phi)], axis=1)
@@ -118,7 +118,7 @@ class DiskSystem:
         ls = lt - lt * (T @ np.linalg.solve(M, T.T @ lt))
         if (ls <= 0).any():
             raise ConformalError("the boundary scale factors are too extreme to close the boundary "
-                                 "curve: try the 'area' boundary mode")
+                                 "curve", 'solve_failed', 'area_boundary')
         P = np.zeros((len(ls), 2))
         P[1:] = np.cumsum(ls[:-1, None] * T[:-1], axis=0)
         return P

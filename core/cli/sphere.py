@@ -5,9 +5,9 @@ import json
 
 import numpy as np
 
-from .moebius import MOEBIUS_MODES
-from .objio import read_obj, write_obj
-from .sphere import sphere_map
+from ..sphere.moebius import MOEBIUS_MODES
+from ..io.obj import read_obj, write_obj
+from ..sphere.map import sphere_map
 
 
 def add_arguments(p):

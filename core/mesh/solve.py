@@ -6,7 +6,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .errors import ConformalError
+from ..errors import ConformalError
 
 
 WORKERS = min(2, os.cpu_count() or 1)
@@ -31,7 +31,7 @@ class Factor:
                                  options=dict(SymmetricMode=True))
         except RuntimeError as exc:
             raise ConformalError(f"the Laplacian is singular ({exc}): the mesh has degenerate "
-                                 "triangles or a disconnected piece") from None
+                                 "triangles or a disconnected piece", 'degenerate') from None
         self.shape = K.shape
 
     def solve(self, b):
@@ -46,5 +46,5 @@ class Factor:
             x = self._lu.solve(b)
         if not np.all(np.isfinite(x)):
             raise ConformalError("the linear solve produced NaN: the mesh is numerically degenerate "
-                                 "(needle or zero-area triangles); clean it up and retry")
+                                 "(needle or zero-area triangles)", 'degenerate', 'clean_mesh')
         return x

@@ -27,8 +27,8 @@ import time
 
 import numpy as np
 
-from .errors import ConformalError
-from .geometry import face_areas
+from ..errors import ConformalError
+from ..mesh.geometry import face_areas
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
 MU_MODES = ('vertex', 'face')
@@ -462,7 +462,7 @@ def geodesic_distance(V, F, sources=None, points=None, uv=None, boundary='unifor
     report = {}
     seconds = {}
     if uv is None:
-        from .flatten import flatten
+        from ..disk.flatten import flatten
         say(0.0, 'flattening')
         res = flatten(V, F, boundary=boundary, fit='true_scale', bound=False)
         uv = res.uv

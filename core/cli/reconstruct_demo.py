@@ -10,12 +10,12 @@ import time
 
 import numpy as np
 
-from .errors import ConformalError
-from .flatten import BOUNDARY_MODES, flatten
-from .metric import (DEFAULT_CELLS, DEFAULT_CONTROL, DEFAULT_CURVATURE, DEFAULT_NOISE, DEFAULT_SMOOTHNESS,
+from ..errors import ConformalError
+from ..disk.flatten import BOUNDARY_MODES, flatten
+from ..metric import (DEFAULT_CELLS, DEFAULT_CONTROL, DEFAULT_CURVATURE, DEFAULT_NOISE, DEFAULT_SMOOTHNESS,
                      reconstruct, simulate_times, vertex_areas)
-from .surfaces import make_surface
-from .topology import boundary_loops
+from ..surfaces import make_surface
+from ..mesh.topology import boundary_loops
 
 TRUE_METRIC_TEXT = 'xi = exp(0.2 x - 0.1 y + 0.3 exp(-((x + 0.5)^2 + (y - 0.4)^2) / 1.2))'
 PAPER_ERROR = 0.06

@@ -1,6 +1,6 @@
 """``python -m core make-surface NAME N OUT.obj``."""
-from .objio import write_obj
-from .surfaces import SURFACES, make_surface
+from ..io.obj import write_obj
+from ..surfaces import SURFACES, make_surface
 
 
 def add_arguments(p):

@@ -326,7 +326,7 @@ def optimise(S, F, A, mode='uniform', progress=None, starts=3):
         info['c'] = c.tolist()
         return _unit(ball_map(c, S)), info
     if mode != 'uniform':
-        from .errors import ConformalError
+        from ..errors import ConformalError
         raise ConformalError(f"unknown Moebius mode {mode!r}: use one of {', '.join(MOEBIUS_MODES)}")
 
     # faces the map folded stay folded under any Moebius map: leave them out of the objective

@@ -6,17 +6,17 @@ import argparse
 import importlib
 import sys
 
-from .errors import ConformalError
+from ..errors import ConformalError
 
 # command name -> (module, one-line help)
 COMMANDS = {
-    'flatten': ('cmd_flatten', 'flatten a disk mesh conformally and write an OBJ with UVs'),
-    'make-surface': ('cmd_surface', 'write one of the test surfaces (DESIGN.md section 7)'),
-    'unwrap': ('cmd_unwrap', 'cut a mesh into islands along seams, flatten and pack them, write per-corner UVs'),
-    'sphere': ('cmd_sphere', 'map a closed genus-0 mesh conformally to the unit sphere (OBJ out)'),
-    'reconstruct': ('cmd_reconstruct', 'recover a metric on a disk mesh from travel times (CSV)'),
-    'reconstruct-demo': ('cmd_reconstruct_demo', 'metric reconstruction experiment of the paper, section 8.2'),
-    'geodesic': ('cmd_geodesic', 'geodesic distances from source vertices by fast marching on the conformal map'),
+    'flatten': ('flatten', 'flatten a disk mesh conformally and write an OBJ with UVs'),
+    'make-surface': ('surface', 'write one of the test surfaces (DESIGN.md section 7)'),
+    'unwrap': ('unwrap', 'cut a mesh into islands along seams, flatten and pack them, write per-corner UVs'),
+    'sphere': ('sphere', 'map a closed genus-0 mesh conformally to the unit sphere (OBJ out)'),
+    'reconstruct': ('reconstruct', 'recover a metric on a disk mesh from travel times (CSV)'),
+    'reconstruct-demo': ('reconstruct_demo', 'metric reconstruction experiment of the paper, section 8.2'),
+    'geodesic': ('geodesic', 'geodesic distances from source vertices by fast marching on the conformal map'),
 }
 
 

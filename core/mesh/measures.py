@@ -92,3 +92,27 @@ def uv_measures(V, F, UV):
     """DESIGN.md section 3 measures of a UV map: dict with faces, flips, mu_ratio, mu_ratio_p1_p99,
     qc_mean (area-weighted) and qc_max. ``V`` (n,3), ``F`` (m,3), ``UV`` (n,2)."""
     return measures_from_jacobians(*jacobians(V, F, UV))[0]
+
+
+def signed_uv_areas(uv, F):
+    """Signed UV areas (m,) of the triangles ``F`` (m,3) under the map ``uv`` (n,2): positive for a
+    counter-clockwise image, in squared UV units."""
+    W = uv[F]
+    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+    return 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def vertex_mu(F, mu, A, n):
+    """The one per-vertex conformal factor (n,): at each vertex, the area-weighted geometric mean of
+    the per-triangle ``mu`` (m,) of the triangles ``F`` (m,3) around it, with weights ``A`` (m,) (the
+    3D areas). The geometric mean because mu is a ratio of lengths: log mu is what varies smoothly.
+    Triangles whose mu is not finite and positive (e.g. temporary hole fill, NaN) are left out;
+    vertices with no such triangle get NaN."""
+    mu = np.asarray(mu, np.float64)
+    ok = np.isfinite(mu) & (mu > 0)
+    w = np.repeat(np.where(ok, np.asarray(A, np.float64), 0.0), 3)
+    lg = np.repeat(np.log(np.where(ok, mu, 1.0)), 3)
+    den = np.bincount(F.ravel(), w, minlength=n)
+    num = np.bincount(F.ravel(), w * lg, minlength=n)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.where(den > 0, np.exp(num / np.where(den > 0, den, 1.0)), np.nan)

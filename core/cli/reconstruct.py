@@ -7,11 +7,11 @@ import json
 
 import numpy as np
 
-from .errors import ConformalError
-from .flatten import BOUNDARY_MODES
-from .metric import (DEFAULT_CELLS, DEFAULT_CONTROL, DEFAULT_CURVATURE, DEFAULT_NOISE, DEFAULT_SMOOTHNESS,
+from ..errors import ConformalError
+from ..disk.flatten import BOUNDARY_MODES
+from ..metric import (DEFAULT_CELLS, DEFAULT_CONTROL, DEFAULT_CURVATURE, DEFAULT_NOISE, DEFAULT_SMOOTHNESS,
                      read_times, reconstruct)
-from .objio import read_obj, write_values
+from ..io.obj import read_obj, write_values
 
 
 def add_arguments(p):

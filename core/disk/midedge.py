@@ -34,13 +34,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import ConformalError
-from .geometry import face_areas
-from .laplacian import cotan_laplacian, face_gradients, gradient
-from .measures import uv_measures
-from .solve import Factor
-from .topology import boundary_loops
-from .validate import check_mesh
+from ..errors import ConformalError
+from ..mesh.geometry import face_areas
+from ..mesh.laplacian import cotan_laplacian, face_gradients, gradient
+from ..mesh.measures import uv_measures
+from ..mesh.solve import Factor
+from ..mesh.validate import check_mesh
 
 
 @dataclass

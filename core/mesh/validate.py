@@ -3,7 +3,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import ConformalError
+from ..errors import ConformalError
 from .geometry import face_areas
 from . import topology
 
@@ -44,7 +44,7 @@ def as_arrays(V, F):
         raise ConformalError(f"mesh arrays are not numeric: {exc}") from None
     if V.size == 0 or F.size == 0:
         raise ConformalError("mesh is empty: it has no vertices or no faces; give a mesh with at least "
-                             "one triangle")
+                             "one triangle", 'empty_mesh')
     if V.ndim != 2 or V.shape[1] != 3:
         raise ConformalError(f"vertex array must have shape (n,3), got {V.shape}")
     if F.ndim != 2 or F.shape[1] != 3:
@@ -72,8 +72,8 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
     V, F = as_arrays(V, F)
     n, m = len(V), len(F)
     if max_faces is not None and m > max_faces:
-        raise ConformalError(f"mesh has {m:,} triangles, over the limit of {max_faces:,}: "
-                             "decimate it, or raise the size limit")
+        raise ConformalError(f"mesh has {m:,} triangles, over the limit of {max_faces:,}", 'too_large',
+                             'raise_limit')
     if F.min() < 0 or F.max() >= n:
         bad = np.nonzero((F < 0).any(1) | (F >= n).any(1))[0]
         raise ConformalError(f"mesh has {_plural(len(bad), 'face')} with indices of missing vertices "
@@ -82,7 +82,7 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
     if not finite.all():
         bad = np.nonzero(~finite)[0]
         raise ConformalError(f"mesh has {_plural(len(bad), 'vertex')} with NaN or infinite coordinates "
-                             f"(vertices {_examples(bad)}): fix or delete them")
+                             f"(vertices {_examples(bad)})", 'bad_coordinates', 'fix_coordinates')
     rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
     Vn = normalise_scale(V)[0]            # the test must not under- or overflow at any mesh scale
     A = face_areas(Vn, F)
@@ -92,18 +92,18 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
     if zero.any():
         bad = np.nonzero(zero)[0]
         raise ConformalError(f"mesh has {_plural(len(bad), 'zero-area face')} (faces {_examples(bad)}): "
-                             "merge vertices by distance or dissolve degenerate faces")
+                             "merge vertices by distance or dissolve degenerate faces", 'degenerate')
     bad = topology.duplicate_rows(F)
     if len(bad):
         raise ConformalError(f"mesh has {_plural(len(bad), 'duplicate face')} (faces {_examples(bad)}): "
-                             "delete the duplicate faces (merge by distance)")
+                             "delete the duplicate faces (merge by distance)", 'bad_topology')
     E, ecount = topology.unique_edges(F)
     if (ecount > 2).any():
         bad = E[ecount > 2]
         ex = ', '.join(f"({a}, {b})" for a, b in bad[:3].tolist())
         raise ConformalError(f"mesh has {_plural(len(bad), 'non-manifold edge')} shared by 3 or more "
                              f"faces, e.g. {ex}: select them (Select All by Trait > Non Manifold) and "
-                             "separate or delete faces")
+                             "separate or delete faces", 'bad_topology')
     H = topology.halfedges(F)
     hk = H[:, 0] * n + H[:, 1]
     uh, hc = np.unique(hk, return_counts=True)
@@ -111,45 +111,44 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
         k = uh[hc > 1][:3]
         ex = ', '.join(f"({a}, {b})" for a, b in zip((k // n).tolist(), (k % n).tolist()))
         raise ConformalError(f"faces are not consistently oriented ({_plural(int((hc > 1).sum()), 'edge')} "
-                             f"run the same way in both faces, e.g. {ex}): recalculate normals")
+                             f"run the same way in both faces, e.g. {ex}): recalculate normals", 'bad_topology')
     used = np.zeros(n, bool)
     used[F.ravel()] = True
     if not used.all() and not allow_loose:
         bad = np.nonzero(~used)[0]
         raise ConformalError(f"mesh has {_plural(len(bad), 'loose vertex')} in no face "
-                             f"(vertices {_examples(bad)}): delete loose geometry")
+                             f"(vertices {_examples(bad)}): delete loose geometry", 'bad_topology')
     twin = topology.twin_halfedges(F, n)
     fans = topology.vertex_fans(F, n, twin)
     if (fans > 1).any():
         bad = np.nonzero(fans > 1)[0]
         raise ConformalError(f"mesh has {_plural(len(bad), 'non-manifold vertex')} where separate "
-                             f"fans of faces touch (vertices {_examples(bad)}): split or rip them apart")
+                             f"fans of faces touch (vertices {_examples(bad)}): split or rip them apart", 'bad_topology')
     ncomp, _ = topology.face_components(F, n, twin)
     if ncomp > 1 and not (allow_parts and kind == 'surface'):
         raise ConformalError(f"mesh has {ncomp} separate parts: flatten one connected piece at a time "
-                             "(separate by loose parts), or flatten the islands one by one")
+                             "(separate by loose parts), or flatten the islands one by one", 'bad_topology')
     loops = topology.boundary_loops(F, n, twin)
     chi = topology.euler_characteristic(F, len(E))
     info = MeshInfo(n_vertices=n, n_faces=m, loops=loops, euler=chi)
     if kind == 'disk':
         if not loops:
-            raise ConformalError("mesh is closed (it has no boundary): use sphere mode, "
-                                 "or mark a seam that cuts it open")
+            raise ConformalError("mesh is closed (it has no boundary)", 'no_boundary', 'use_sphere')
         if len(loops) > 1:
             raise ConformalError(f"mesh has {len(loops)} boundary loops; disk mode needs exactly one: "
-                                 "mark seams or fill holes")
+                                 "mark seams or fill holes", 'holes')
         if chi != 1:
             genus = (2 - chi - len(loops)) // 2
             raise ConformalError(f"mesh has one boundary loop but genus {genus} (Euler characteristic "
-                                 f"{chi}, a disk has 1): mark seams that cut it into a disk")
+                                 f"{chi}, a disk has 1): mark seams that cut it into a disk", 'genus')
     elif kind == 'sphere':
         if loops:
             raise ConformalError(f"mesh is open ({_plural(len(loops), 'boundary loop')}); sphere mode "
-                                 "needs a closed mesh: use disk mode, or fill the holes")
+                                 "needs a closed mesh: use disk mode, or fill the holes", 'bad_topology')
         if chi != 2:
             genus = (2 - chi) // 2
             raise ConformalError(f"mesh has genus {genus} (Euler characteristic {chi}); sphere mode needs "
-                                 "genus 0: mark seams and use disk mode")
+                                 "genus 0: mark seams and use disk mode", 'genus')
     elif kind != 'surface':
         raise ConformalError(f"unknown mesh kind {kind!r}: use 'disk', 'sphere' or 'surface'")
     return info
@@ -169,4 +168,4 @@ def check_loose_edges(E, F):
         bad = np.nonzero(~used)[0]
         ex = ', '.join(f"({a}, {b})" for a, b in E[bad[:3]].tolist())
         raise ConformalError(f"mesh has {_plural(len(bad), 'loose edge')} in no face, e.g. {ex}: "
-                             "delete loose geometry (Select All by Trait > Loose Geometry)")
+                             "delete loose geometry (Select All by Trait > Loose Geometry)", 'bad_topology')

@@ -7,9 +7,9 @@ import json
 
 import numpy as np
 
-from .flatten import BOUNDARY_MODES
-from .geodesic import SOLVERS, geodesic_distance
-from .objio import read_obj, write_values
+from ..disk.flatten import BOUNDARY_MODES
+from ..geodesic.solver import SOLVERS, geodesic_distance
+from ..io.obj import read_obj, write_values
 
 
 def add_arguments(p):

@@ -27,11 +27,11 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from .errors import ConformalError
-from .geometry import face_areas
-from .measures import uv_measures
-from . import topology
-from .validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, check_loose_edges, normalise_scale
+from ..errors import ConformalError
+from ..mesh.geometry import face_areas
+from ..mesh.measures import uv_measures
+from ..mesh import topology
+from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, check_loose_edges, normalise_scale
 
 HOLE_MODES = ('fill', 'cut', 'error')
 ISLAND_SCALES = ('true', 'normalise')
@@ -342,25 +342,21 @@ def _describe(i, n_isl, faces, tri_poly):
 def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
     """Flatten one island (local ``V`` (n,3), ``F`` (m,3), its boundary ``loops``). Returns (uv (n,2)
     in mesh units with UV area = 3D area, report dict)."""
-    from .flatten import flatten
+    from ..disk.flatten import flatten
     n, m = len(V), len(F)
     rep = {'loops': len(loops)}
     if not loops:
-        raise ConformalError(f"{desc} is closed (it has no boundary): mark seams that cut it open "
-                             "(for example a seam loop around it plus a seam across each half), or use "
-                             "sphere mode")
+        raise ConformalError(f"{desc} is closed (it has no boundary)", 'no_boundary', 'mark_seams')
     chi = topology.euler_characteristic(F)
     genus = (2 - chi - len(loops)) // 2
     if genus > 0:
         raise ConformalError(f"{desc} has genus {genus} (Euler characteristic {chi} with {len(loops)} "
-                             f"boundary loop(s)): mark seams that cut through every handle")
+                             f"boundary loop(s))", 'genus', 'cut_handles')
     Vf, Ff = V, F
     if len(loops) > 1:
         if holes == 'error':
             raise ConformalError(f"{desc} has {len(loops)} boundary loops (an outer boundary and "
-                                 f"{len(loops) - 1} hole(s)): fill the holes (holes='fill', CLI "
-                                 "--holes fill), cut them open (holes='cut'), or mark a seam from each "
-                                 "hole to the outer boundary")
+                                 f"{len(loops) - 1} hole(s))", 'holes', 'fill_holes')
         Vf, Ff, info = fill_holes(V, F, loops)
         rep['holes'] = {'mode': 'fill', 'filled': len(info), 'fill_vertices': sum(h['fill_vertices'] for h in info),
                         'fill_faces': sum(h['fill_faces'] for h in info),
@@ -469,12 +465,12 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='tru
                 rep['holes'] = {**rep.get('holes', {}), **cut_info[i]}
                 rep['loops_before_cut'] = rep['loops'] + cut_info[i]['cut']
         except ConformalError as exc:
-            msg = str(exc)
-            if not msg.startswith('island '):
-                msg = f"{desc}: {msg}"
+            if not exc.problem.startswith('island '):
+                exc = exc.with_context(desc)
             if on_error == 'raise' or n_isl == 1:
-                raise ConformalError(msg) from None
-            rep['error'] = msg
+                raise exc from None
+            rep['error'] = str(exc)
+            rep['error_code'], rep['error_remedy'], rep['error_problem'] = exc.code, exc.remedy, exc.problem
             failed.append(i)
             ok[faces] = False
             ui = np.zeros((hi - lo, 2))
@@ -490,7 +486,9 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='tru
         reports.append(rep)
         boxes.append(ui.max(0) if 'error' not in rep else np.zeros(2))
     if len(failed) == n_isl:
-        raise ConformalError(f"no island could be flattened; the first error: {reports[0]['error']}")
+        first = reports[0]
+        raise ConformalError(f"no island could be flattened; the first error: {first['error_problem']}",
+                             first['error_code'], first['error_remedy'])
     report_progress(0.92, 'packing islands')
     boxes = np.array(boxes)
     good = np.array(['error' not in r for r in reports])

@@ -1,0 +1,2 @@
+"""Whole meshes to UV atlases: cutting along seams, islands, holes, packing, and ``unwrap``, the single
+entry for UV work."""

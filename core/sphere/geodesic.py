@@ -1,0 +1,273 @@
+"""Geodesic distances on a closed genus-0 mesh through its conformal sphere map (docs/math.md,
+"Sphere mode"): fast marching on two overlapping stereographic charts.
+"""
+import time
+
+import numpy as np
+
+from ..errors import ConformalError
+from ..mesh.geometry import face_areas
+from .map import sphere_map
+
+# --- geodesic distances through the sphere ----------------------------------------------------------
+# Two stereographic charts, each a regular grid: N (w = (x + i y) / (1 + z), the north pole at 0) and
+# S (w' = (x - i y) / (1 - z) = 1 / w, the south pole at 0), each over the disk |w| <= R, so that they
+# overlap in the band of latitudes -beta..beta (R = tan((90 + beta) / 2 degrees)). A surface length
+# element is ds = |dw| / speed with speed = mu_S (1 + |w|^2) / 2, mu_S the sphere length per surface
+# length. Fast marching runs in buckets of time: a path that crosses the whole overlap band needs at
+# least W = (R - 1/R) / (largest speed in the band), so within a bucket [tau, tau + W] every optimal
+# path segment lies in one chart; both charts march from the contour T = tau, the results are
+# exchanged through the overlap (bilinear sampling), and the nodes up to tau + W are final.
+GEO_OVERLAP_DEG = 25.0
+
+
+class _Chart:
+    """One stereographic chart as a ``core.geodesic.Grid`` over [-R, R]^2 with the speed field."""
+
+    def __init__(self, which, S, F, logmu_v, R, nodes):
+        from ..geodesic.solver import Grid
+        self.which = which
+        self.R = R
+        w = self.coords_of(S)
+        keep = (np.abs(w[F]) <= 2.0 * R).all(1)
+        box = np.array([[-R, -R], [R, R]])
+        self.G = G = Grid(box, nodes, pad=1)
+        uv = np.stack([w.real, w.imag], 1)
+        G.rasterise(uv, F[keep])
+        ny, nx = G.shape
+        jj, ii = np.meshgrid(np.arange(nx), np.arange(ny))
+        self.w = (G.origin[0] + jj * G.h) + 1j * (G.origin[1] + ii * G.h)
+        self.valid = G.inside & (np.abs(self.w) <= R)
+        lm = G.interpolate(uv, F[keep], logmu_v)
+        lm = np.where(self.valid, lm, 0.0)
+        self.speed = np.where(self.valid, np.exp(lm) * 0.5 * (1.0 + np.abs(self.w) ** 2), 1.0)
+        self.h = G.h
+
+    def coords_of(self, X):
+        """Chart coordinates (k,) complex of unit vectors X (k,3)."""
+        if self.which == 'N':
+            with np.errstate(divide='ignore', invalid='ignore'):
+                return (X[:, 0] + 1j * X[:, 1]) / (1.0 + X[:, 2])
+        with np.errstate(divide='ignore', invalid='ignore'):
+            return (X[:, 0] - 1j * X[:, 1]) / (1.0 - X[:, 2])
+
+    def node_coords(self, w):
+        """Continuous node coordinates (k,2) (column, row) of chart points w (k,) complex."""
+        return self.G.coords(np.stack([w.real, w.imag], 1))
+
+    def sample(self, T, w):
+        from ..geodesic.solver import bilinear
+        return bilinear(np.where(self.valid, T, np.nan), self.node_coords(w), self.valid)
+
+
+def _seed(chart, ws, radius):
+    """Exact local times (ny, nx) (inf elsewhere) around the sources at chart points ``ws`` (k,),
+    within ``radius`` + 3 cells: chart distance times the Simpson mean of 1/speed, and the time
+    ``tau`` up to which the seed disks are complete."""
+    from ..geodesic.solver import bilinear
+    G = chart.G
+    ny, nx = G.shape
+    P = chart.node_coords(ws)
+    w = int(np.ceil(radius)) + 3
+    off = np.arange(-w, w + 1)
+    oi, oj = np.meshgrid(off, off, indexing='ij')
+    ci = np.rint(P[:, 1]).astype(np.int64)[:, None] + oi.ravel()[None]
+    cj = np.rint(P[:, 0]).astype(np.int64)[:, None] + oj.ravel()[None]
+    src = np.repeat(np.arange(len(P)), oi.size)
+    ci, cj = ci.ravel(), cj.ravel()
+    ok = (ci >= 0) & (ci < ny) & (cj >= 0) & (cj < nx)
+    ci, cj, src = ci[ok], cj[ok], src[ok]
+    ok = chart.valid[ci, cj]
+    ci, cj, src = ci[ok], cj[ok], src[ok]
+    if not len(ci):
+        return np.full(G.shape, np.inf), np.inf
+    Q = np.stack([cj, ci], 1).astype(np.float64)
+    inv = 1.0 / chart.speed
+    f = (bilinear(inv, P[src], chart.valid) + 4.0 * bilinear(inv, 0.5 * (P[src] + Q), chart.valid)
+         + bilinear(inv, Q, chart.valid)) / 6.0
+    T = np.full(G.shape, np.inf)
+    np.minimum.at(T, (ci, cj), np.linalg.norm(Q - P[src], axis=1) * G.h * f)
+    tau = radius * G.h / float(chart.speed[ci, cj].max())
+    return T, tau
+
+
+def _march(phi, chart, solver, T0=None, narrow=0.0):
+    """Travel time (ny, nx) from the zero contour of ``phi`` in ``chart`` (inf where not reached).
+    With scikit-fmm the march stops ``narrow`` beyond the contour (0: no limit); otherwise
+    ``core.geodesic.march`` runs (the numpy sweep holds ``T0``'s finite nodes fixed and returns full
+    times). Returns (T, solver used)."""
+    from ..geodesic.solver import march
+    mask = ~chart.valid
+    if solver in ('auto', 'skfmm'):
+        try:
+            import skfmm
+        except ImportError:
+            skfmm = None
+        if skfmm is not None:
+            T = skfmm.travel_time(np.ma.MaskedArray(phi, mask), np.where(mask, 1.0, chart.speed),
+                                  dx=chart.h, order=2, narrow=narrow)
+            T = np.ma.filled(np.ma.MaskedArray(T), np.inf).astype(np.float64)
+            T[mask] = np.inf
+            return T, 'skfmm'
+    if T0 is None:
+        T0 = np.where(phi < 0, 0.0, np.inf)
+    return march(T0, phi < 0, phi, chart.speed, mask, chart.h, solver)
+
+
+def default_sphere_grid(n_vertices):
+    """Nodes per side of each chart's grid: about 4 per sqrt(vertex), rounded up to a multiple of 64,
+    clipped to 256..768."""
+    return int(np.clip(64 * np.ceil(4.0 * np.sqrt(n_vertices) / 64), 256, 768))
+
+
+def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver='auto',
+                    overlap=GEO_OVERLAP_DEG, source_radius=8.0, progress=None):
+    """Geodesic distances on a closed genus-0 mesh by fast marching through its conformal sphere.
+
+    V (n,3), F (m,3); ``sources`` vertex indices (k,) (the result is the distance to the nearest).
+    ``S`` (n,3): a sphere map to reuse (from ``sphere_map``); None computes one with ``moebius``.
+    ``grid``: nodes per side of each chart (None: ``default_sphere_grid``). ``solver``: as
+    ``core.geodesic.march`` ('auto', 'skfmm', 'sweep'). ``overlap``: half-width of the band the two
+    charts share, in degrees of latitude. ``source_radius``: exact seed disk radius, in cells.
+    Returns ``(dist (n,) float64 in mesh units, report dict)``."""
+    from ..geodesic.solver import calibrate_phi, vertex_mu
+    say = progress or (lambda f, msg: None)
+    t0 = time.perf_counter()
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    n = len(V)
+    src = np.atleast_1d(np.asarray(sources))
+    if src.size == 0:
+        raise ConformalError("no source given: pass at least one source vertex")
+    if not np.issubdtype(src.dtype, np.integer) or src.min() < 0 or src.max() >= n:
+        raise ConformalError(f"source vertices must be indices in 0..{n - 1}")
+    if not 5.0 <= overlap <= 60.0:
+        raise ConformalError("overlap must be between 5 and 60 degrees")
+    report = {}
+    if S is None:
+        say(0.0, 'mapping to the sphere')
+        res = sphere_map(V, F, moebius=moebius)
+        S = res.S
+        report['sphere'] = {k: res.report[k] for k in ('moebius', 'mu_ratio', 'qc_mean', 'flips')}
+    S = np.asarray(S, np.float64)
+    S = S / np.linalg.norm(S, axis=1)[:, None]
+    if S.shape != V.shape:
+        raise ConformalError(f"S must have shape {V.shape}, got {S.shape}")
+    if grid is None:
+        grid = default_sphere_grid(n)
+    # sphere length per surface length, per triangle (unnormalised) and per vertex
+    P = S[F]
+    a_s = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
+    mu_f = np.sqrt(np.maximum(a_s, np.finfo(float).tiny) / face_areas(V, F))
+    logmu_v = np.log(vertex_mu(V, F, mu_f))
+    R = float(np.tan(np.radians(45.0 + 0.5 * overlap)))
+    say(0.2, 'rasterising the charts')
+    charts = [_Chart('N', S, F, logmu_v, R, grid), _Chart('S', S, F, logmu_v, R, grid)]
+    other = [charts[1], charts[0]]
+    # node positions of each chart in the other chart's coordinates (the band only)
+    for c, o in zip(charts, other):
+        wo = np.where(c.valid, 1.0 / np.where(c.w == 0, 1.0, c.w), np.inf)
+        c.band = c.valid & (np.abs(wo) <= R * (1.0 - 2.0 * o.h / R))
+        c.band_w = wo[c.band]
+    # bucket width W: the shortest time to cross the overlap band. Measured by one march in chart N
+    # from the disk |w| <= 1/R to the circle |w| = R (the band is the same set in chart S, and a
+    # crossing reversed is a crossing), less two cells for the interpolation between the charts.
+    cN = charts[0]
+    phi = np.where(cN.valid, (np.abs(cN.w) - 1.0 / R), 1.0)
+    Tb = _march(phi, cN, solver)[0]
+    rim = cN.valid & (np.abs(cN.w) >= R - 1.5 * cN.h)
+    vmax = max(float(c.speed[c.valid].max()) for c in charts)
+    W = float(np.min(Tb[rim])) - 2.0 * max(c.h for c in charts) / vmax
+    if not W > 0:
+        raise ConformalError("the overlap band of the two charts is too thin for this grid: "
+                             "increase the grid size or the overlap")
+    # seeds: each source in every chart its seed window reaches (the window is clipped to the
+    # chart), so that both charts know the first contour wherever it lies in their domain
+    xs = S[src]
+    T, tau = [], np.inf
+    for c in charts:
+        ws = c.coords_of(xs)
+        with np.errstate(invalid='ignore'):
+            inside = np.abs(ws) <= R + (source_radius + 4) * c.h
+        if inside.any():
+            Tc, tc = _seed(c, ws[inside], source_radius)
+            tau = min(tau, tc)
+        else:
+            Tc = np.full(c.G.shape, np.inf)
+        T.append(Tc)
+    # nodes of the seed windows beyond tau keep their exact local times: they place the contour
+    say(0.3, 'marching')
+    t = time.perf_counter()
+    used = None
+    buckets = 0
+    while True:
+        buckets += 1
+        new = []
+        for c, Tc in zip(charts, T):
+            known = np.isfinite(Tc) & (Tc <= tau) & c.valid
+            if not known.any():
+                new.append(np.full(c.G.shape, np.inf))
+                continue
+            far = 4.0 * c.h
+            phi = np.where(np.isfinite(Tc), (Tc - tau) * c.speed, far)
+            phi = np.where(c.valid, np.minimum(phi, far), far)
+            phi = calibrate_phi(phi, c.valid, c.h)
+            if not (phi[c.valid] < 0).any() or not (phi[c.valid] > 0).any():
+                new.append(Tc.copy())
+                continue
+            Tm, used = _march(phi, c, solver, T0=np.where(known, Tc, np.inf))
+            Tn = np.where(known, Tc, np.fmin(Tc, (Tm + tau) if used == 'skfmm' else Tm))
+            Tn[~c.valid] = np.inf
+            new.append(Tn)
+        # exchange through the overlap
+        for k, (c, o) in enumerate(zip(charts, other)):
+            Ti = o.sample(new[1 - k], c.band_w)
+            Tb = new[k][c.band]
+            new[k][c.band] = np.fmin(Tb, np.where(np.isfinite(Ti), Ti, np.inf))
+        T = new
+        tau = tau + W
+        left = sum(int((c.valid & ~(T[k] <= tau)).sum()) for k, c in enumerate(charts))
+        if left == 0 or buckets > 10000:
+            break
+        # the next contour must exist: jump over empty buckets
+        lo = min(float(np.min(np.where(c.valid & (T[k] > tau - W), T[k], np.inf))) for k, c in enumerate(charts))
+        if not np.isfinite(lo):
+            raise ConformalError("the fast marching front stopped before covering the sphere: "
+                                 "increase the grid size")
+    seconds_march = time.perf_counter() - t
+    # sample at the vertices from the chart where each is more interior
+    say(0.9, 'sampling')
+    dist = np.empty(n)
+    north = S[:, 2] >= 0
+    for c, sel in zip(charts, (north, ~north)):
+        dist[sel] = c.sample(T[charts.index(c)], c.coords_of(S[sel]))
+    # the sources themselves and their neighbourhoods: exact local times (chart N or S)
+    for c, sel in zip(charts, (north, ~north)):
+        near = sel.copy()
+        if not near.any():
+            continue
+        ws = c.coords_of(xs)
+        here = np.abs(ws) <= R
+        if not here.any():
+            continue
+        ws, s_here = ws[here], src[here]
+        wv = c.coords_of(S[near])
+        from scipy.spatial import cKDTree
+        d, j = cKDTree(np.stack([ws.real, ws.imag], 1)).query(np.stack([wv.real, wv.imag], 1))
+        close = d <= source_radius * c.h
+        if close.any():
+            idx = np.nonzero(near)[0][close]
+            sp_v = np.exp(logmu_v[idx]) * 0.5 * (1 + np.abs(wv[close]) ** 2)
+            sp_s = np.exp(logmu_v[s_here[j[close]]]) * 0.5 * (1 + np.abs(ws[j[close]]) ** 2)
+            local = d[close] * 0.5 * (1.0 / sp_v + 1.0 / sp_s)
+            dist[idx] = np.fmin(dist[idx], local)
+    dist[src] = 0.0
+    if not np.isfinite(dist).all():
+        bad = int((~np.isfinite(dist)).sum())
+        raise ConformalError(f"{bad} vertices were not reached by the front: increase the grid size")
+    report.update({'grid': list(charts[0].G.shape), 'cell': [c.h for c in charts], 'charts': 2,
+                   'overlap_deg': overlap, 'buckets': buckets, 'bucket_width': W, 'solver': used,
+                   'sources': int(src.size),
+                   'seconds': {'march': round(seconds_march, 4),
+                               'total': round(time.perf_counter() - t0, 4)}})
+    return dist, report
