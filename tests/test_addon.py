@@ -183,16 +183,18 @@ def test_attributes_domain_type_range(addon, bl):
     assert 0.5 < lo < 1 < hi < 2                       # mu is normalised: total UV area = 3D area
     rep = addon.addon.meshio.load_report(me, 'conformal_flatten_report')
     assert rep['conformal_factor_range'] == pytest.approx([lo, hi])
-    # independent check: vertex mu^2 = (UV area / 3D area of the vertex star) / (total ratio)
+    # independent check: vertex mu = area-weighted geometric mean over the vertex star of the
+    # triangle mu = sqrt((UV area / 3D area) / (total ratio)) (docs/math.md: the one per-vertex mu)
     cv = corner_verts(me)
     UVv = np.zeros((len(V), 2))
     UVv[cv] = loop_uv(me)
     e1, e2 = UVv[F[:, 1]] - UVv[F[:, 0]], UVv[F[:, 2]] - UVv[F[:, 0]]
     a_uv = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
     a_3d = face_areas(V, F)
-    star_uv = np.bincount(F.ravel(), np.repeat(a_uv, 3), minlength=len(V))
+    log_mu = 0.5 * np.log(a_uv / a_3d / (a_uv.sum() / a_3d.sum()))
+    star_log = np.bincount(F.ravel(), np.repeat(a_3d * log_mu, 3), minlength=len(V))
     star_3d = np.bincount(F.ravel(), np.repeat(a_3d, 3), minlength=len(V))
-    expect = np.sqrt(star_uv / star_3d / (a_uv.sum() / a_3d.sum()))
+    expect = np.exp(star_log / star_3d)
     np.testing.assert_allclose(mu, expect, rtol=1e-4)
     # colours: in [0,1], the extremes get the ends of the colour map
     col = point_attr(me, 'conformal_factor_color', 'color', 4)
@@ -347,14 +349,14 @@ def test_no_active_object_fails(addon, bl):
 
 
 def test_report_and_summary(addon, bl):
-    from conformal_flatten.addon import ops_flatten, ui
+    from conformal_flatten.addon import ops_flatten, report, ui
     obj, _, _ = bump_object(bl)
     bpy.ops.uv.conformal_flatten(boundary='UNIFORM')
     rep = addon.addon.meshio.load_report(obj.data, ops_flatten.REPORT_KEY)
     for key in ('mu_ratio', 'bound_vertex', 'flips', 'qc_mean', 'seconds', 'mesh_hash'):
         assert rep[key] is not None, key
     assert rep['bound_vertex'] >= rep['mu_ratio'] * 0.98
-    line = ops_flatten.summary_line(rep)
+    line = report.summary_line(rep)
     assert 'mu ratio' in line and 'certified bound' in line and 'flips' in line
     assert ui.geodesic_solver_label()
 
@@ -418,7 +420,7 @@ def test_panel_draws_report_and_sections(addon, bl):
     assert any(t.startswith("Geodesic solver: ") for t in labels)
     assert calls and "Extra" in labels
     ui.remove_section(extra)
-    assert all(d is not extra for _, d in ui._sections)
+    assert all(d is not extra for _, d in ui.sections())
     prefs = get_prefs(bpy.context)
     assert isinstance(prefs, ConformalFlattenPreferences)       # enabled: the real preferences
     log.clear()

@@ -38,8 +38,8 @@ def point_float(me, name):
 def test_operator_registered(addon):
     assert hasattr(bpy.ops.mesh, 'conformal_reconstruct_metric')
     from conformal_flatten.addon import ops_metric
-    from conformal_flatten.addon import ui
-    assert any(d is ops_metric.draw_section for _, d in ui._sections)
+    from conformal_flatten.addon import sidebar
+    assert any(d is ops_metric.draw_section for _, d in sidebar.sections())
 
 
 @pytest.mark.parametrize('mode', ['OBJECT', 'EDIT'])
