@@ -24,6 +24,7 @@ Units: UVs are in mesh units for ``fit='true_scale'`` (UV area = 3D area), in [0
 """
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+import time
 
 import numpy as np
 
@@ -175,6 +176,7 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
 
     Returns ``UnwrapResult``. Raises ``ConformalError`` when no answer exists (the message names the
     problem; ``exc.remedy`` says what to do)."""
+    t0 = time.perf_counter()
     V, F = as_arrays(V, F)
     m = len(F)
     if tri_poly is not None:
@@ -253,6 +255,7 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
                     'overlaps': int(sum(r.get('overlaps', 0) for r in islands if 'error' not in r)),
                     'qc_mean_worst': float(max(r['qc_mean'] for r in islands if 'error' not in r)),
                     'mu_ratio_worst': float(min(r['mu_ratio'] for r in islands if 'error' not in r)),
+                    'seconds': round(time.perf_counter() - t0, 4),
                     'mu_range': [float(np.nanmin(mu_s)), float(np.nanmax(mu_s))],
                     'warnings': len(warnings)})
     return UnwrapResult(uv_corner=uv_corner, flattened=flattened, face_island=face_island, mu=mu,
