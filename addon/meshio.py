@@ -241,7 +241,9 @@ def bake_scalar(me, name, values, colormap_name='PERCEPTUAL', log=True, centre=N
 
 # --- per-face to per-vertex ----------------------------------------------------------------------
 def face_to_vertex(F, values, weights, n, power=1.0):
-    """Weighted mean at each of the ``n`` vertices of per-triangle ``values`` (m,) over the triangles
+    """Deprecated, kept only for ``ops_sphere`` until it switches to ``core.mesh.measures.vertex_mu``
+    (the one per-vertex mu, an area-weighted geometric mean); nothing else in the add-on may use it.
+    Weighted mean at each of the ``n`` vertices of per-triangle ``values`` (m,) over the triangles
     ``F`` (m,3) around it, with ``weights`` (m,) (e.g. areas). With ``power`` p it averages v**p and
     returns the p-th root (p = 2 for conformal factors: the vertex value is then sqrt(UV area / 3D area)
     of the vertex's star). Vertices in no triangle get NaN."""

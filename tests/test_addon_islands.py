@@ -6,6 +6,7 @@ independently of the add-on (core triangulation + ``cut_along_seams`` on the sea
 mesh), and overlap between islands is tested exactly (separating axes) on every pair of triangles
 from different islands."""
 import json
+import re
 import types
 
 import bpy
@@ -14,6 +15,8 @@ import numpy as np
 import pytest
 
 from meshgen import two_holes
+
+pytestmark = pytest.mark.bpy
 
 
 # --- helpers -------------------------------------------------------------------------------------
@@ -584,7 +587,8 @@ def test_modal_escape_and_timer(addon, bl):
     timer = object()
 
     def fake_operator(run):
-        return types.SimpleNamespace(_run=run, _timer=None, report=lambda kind, msg: reports.append((kind, msg)),
+        return types.SimpleNamespace(_run=run, _timer=None,
+                                     report=lambda kind, msg: reports.append((kind, msg)),
                                      _cleanup=lambda ctx: None, _done=lambda r: {'FINISHED'})
     run = _run_for_active(addon, boundary='AREA')
     run.read(bpy.context)
@@ -689,3 +693,29 @@ def test_sidebar_islands_section(addon, bl):
     ui.draw_islands_section(Layout(), bpy.context)
     assert labels == ["Islands", "3", "Holes", "1 filled", "Faces", "all", "Packing", "shelf",
                       "Objects", "1"]
+
+
+def test_skip_bad_islands_skips_a_closed_object(addon, bl, capfd):
+    """Issue 12: with Skip Bad Islands a closed object among the selected ones is skipped with a
+    WARNING (its data untouched); the other objects are flattened."""
+    a = sphere_with_seams(32, 16, name='A')
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, location=(6, 0, 0))   # closed
+    c = bpy.context.object
+    a.select_set(True)
+    before = bl.mesh_snapshot(c.data)
+    capfd.readouterr()
+    assert bpy.ops.uv.conformal_flatten(boundary='AREA', skip_bad_islands=True) == {'FINISHED'}
+    out = capfd.readouterr().out
+    assert re.search(r"Warning: skipped object 'Sphere': island 1 of 1 .* is closed.*Mark Seam", out), out
+    bl.assert_same(before, bl.mesh_snapshot(c.data))
+    rep = report_of(a.data)
+    assert rep['islands'] == 2 and rep['flips'] == 0
+    assert rep['skipped_objects'][0]['object'] == 'Sphere'
+    assert rep['skipped_objects'][0]['error_code'] == 'no_boundary'
+    check_islands_layout(a.data)
+    # alone, the closed object is still an error (nothing can be flattened)
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o is c)
+    bpy.context.view_layer.objects.active = c
+    with pytest.raises(RuntimeError, match='is closed'):
+        bpy.ops.uv.conformal_flatten(boundary='AREA', skip_bad_islands=True)

@@ -5,6 +5,8 @@ import bpy
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.bpy
+
 N = 17          # flat grid: geodesics are straight lines, so times = c * distance are exact
 
 
