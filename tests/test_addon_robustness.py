@@ -70,8 +70,10 @@ def test_bad_mesh_fails_unchanged(addon, bl, name, mode):
 
 
 @pytest.mark.parametrize('mode', ['OBJECT', 'EDIT'])
-@pytest.mark.parametrize('value', [np.nan, np.inf])
+@pytest.mark.parametrize('value', [np.nan, np.inf, -np.finfo(np.float32).max])
 def test_non_finite_coordinates_fail_unchanged(addon, bl, value, mode):
+    """NaN, inf, and -FLT_MAX (what Blender stores when "-inf" is typed into a number field; issue 12:
+    it was reported as "zero-area faces") are all named as non-finite coordinates."""
     V, polys = _grid()
     obj = bl.mesh_object('nan', V, polys)
     pos = np.empty(3 * len(V), np.float32)
@@ -140,6 +142,6 @@ def test_infinite_coordinate_with_seams_named(addon, bl, mode):
     me.edges.foreach_set('use_seam', seam)
     pos = np.empty(3 * len(V), np.float32)
     me.attributes['position'].data.foreach_get('vector', pos)
-    pos[3 * 12] = np.inf
+    pos[3 * 12] = np.finfo(np.float32).max          # "inf" typed into Blender's UI
     me.attributes['position'].data.foreach_set('vector', pos)
     _fails_unchanged(bl, r'NaN or infinite coordinates \(vertices 12\): fix or delete', mode)
