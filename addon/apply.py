@@ -22,12 +22,12 @@ MAX_ISLAND_REPORTS = 100                 # per-island entries kept in the stored
 NO_VALUE_RGBA = (0.5, 0.5, 0.5, 1.0)     # colour of vertices without a baked value
 
 
-def job_loops(job, res):
+def job_loops(job, res) -> np.ndarray:
     """(k,3) corner (loop) indices of the flattened triangles of ``job`` (``JobResult`` ``res``)."""
     return job.md.tri_corners[res.tris]
 
 
-def write_uvs(me, loops, uv_tri):
+def write_uvs(me, loops: np.ndarray, uv_tri: np.ndarray) -> str:
     """Write the corner UVs ``uv_tri`` (k,3,2) of the corners ``loops`` (k,3) into the active UV map;
     the other corners keep their float32 values bit for bit. Returns the layer's name."""
     old = meshio.read_uv(me)
@@ -36,7 +36,7 @@ def write_uvs(me, loops, uv_tri):
     return meshio.write_uv(me, new)
 
 
-def pack_with_blender(context, objs, faces, opts):
+def pack_with_blender(context, objs: list, faces: list, opts) -> str | None:
     """Arrange the islands of the polygons ``faces[i]`` ((p,) bool) of mesh objects ``objs`` (Object
     mode) with ``bpy.ops.uv.pack_islands`` in Edit mode: one layout for all of ``objs``, relative
     island scale kept (one global scale). Selections are put back bitwise. Returns None, or the
@@ -70,7 +70,7 @@ def pack_with_blender(context, objs, faces, opts):
     return error
 
 
-def rescale_true(group):
+def rescale_true(group: list) -> None:
     """After Pack Islands (which fits the unit square), scale the UVs of ``group`` ((MeshJob,
     JobResult) pairs) back to mesh units with one factor for the whole group
     (``core.atlas.unwrap.true_scale``: UV area = 3D area over the flattened faces)."""
@@ -87,7 +87,7 @@ def rescale_true(group):
         meshio.write_uv(me, new)
 
 
-def pack_groups(context, jobs, results, opts):
+def pack_groups(context, jobs: list, results: list, opts) -> dict:
     """Arrange the islands of every result the core packed (several islands), per mesh or in one
     shared layout. Returns {mesh pointer: (packer name, note or None)}."""
     packer = {}
@@ -118,7 +118,7 @@ def pack_groups(context, jobs, results, opts):
     return packer
 
 
-def bake(me, mu_vertex, colormap_name):
+def bake(me, mu_vertex: np.ndarray, colormap_name: str) -> tuple:
     """Bake per-vertex mu (n,) (NaN where no face was flattened: such vertices keep a previous baked
     value, or get NaN and a grey colour). Returns (min, max) of the finite values."""
     vals = np.asarray(mu_vertex, float)
@@ -139,7 +139,7 @@ def bake(me, mu_vertex, colormap_name):
     return lo, hi
 
 
-def island_summary(r):
+def island_summary(r: dict) -> dict:
     """The per-island entry of the stored report; a failed island's ``error`` in Blender wording."""
     keep = ('island', 'triangles', 'vertices', 'loops', 'holes', 'flips', 'mu_ratio', 'qc_mean',
             'qc_max', 'overlaps', 'bound_vertex', 'warnings')
@@ -150,7 +150,8 @@ def island_summary(r):
     return out
 
 
-def finish(job, res, uv_name, packer, pack_note, colormap, opts, seconds):
+def finish(job, res, uv_name: str, packer: str, pack_note: str | None, colormap: str, opts,
+           seconds: dict) -> dict:
     """Bake and store the report of one mesh (``job``, ``res``). ``seconds``: dict of timings.
     Every measure comes from the core's result. Returns the report dict."""
     me = job.obj.data
@@ -185,13 +186,13 @@ def finish(job, res, uv_name, packer, pack_note, colormap, opts, seconds):
     return report
 
 
-def skipped_entry(skipped):
+def skipped_entry(skipped) -> dict:
     """The stored form of an object skipped with ``skip_bad_islands`` (``job.Skipped``)."""
     exc = skipped.error
     return {'object': skipped.name, 'error': message(exc), 'error_code': exc.code}
 
 
-def apply_all(context, jobs, results, skipped, opts, t0, t_read):
+def apply_all(context, jobs: list, results: list, skipped: list, opts, t0: float, t_read: float) -> list:
     """Write every result (Object mode). ``results[i]`` is None for a skipped job. Returns the
     per-mesh reports (the first one lists the skipped objects)."""
     t = time.perf_counter()

@@ -1,7 +1,7 @@
 """Report text of a flatten run: the status-bar line and the WARNING lines (bpy-free)."""
 
 
-def summary_line(r):
+def summary_line(r: dict) -> str:
     """One line for the status bar: islands, holes, ratio, bound, flips, conformality, range, time."""
     parts = [f"Conformal flatten {r['object']!r} ({r['boundary'].lower()}): {r['triangles']} triangles"]
     n_isl = r.get('islands')
@@ -27,7 +27,7 @@ def summary_line(r):
     return ', '.join(parts)
 
 
-def run_summary(reports):
+def run_summary(reports: list) -> str:
     """The operator's INFO line for one or several meshes."""
     if len(reports) == 1:
         return summary_line(reports[0])
@@ -45,7 +45,7 @@ def run_summary(reports):
                    f"{total:.2f} s")
 
 
-def warnings_of(reports):
+def warnings_of(reports: list) -> list:
     """WARNING lines: objects and islands skipped, quality warnings of the core (flips, overlaps,
     poor conformality, no convergence), packing fallbacks."""
     out = []

@@ -24,18 +24,18 @@ BLENDER_REMEDIES = {
 assert BLENDER_REMEDIES.keys() == REMEDIES.keys(), "every core remedy needs a Blender wording"
 
 
-def remedy_text(key):
+def remedy_text(key: str | None) -> str | None:
     """Blender wording of the remedy ``key`` (None -> None)."""
     return None if key is None else BLENDER_REMEDIES.get(key, REMEDIES.get(key))
 
 
-def compose(problem, remedy):
+def compose(problem: str, remedy: str | None) -> str:
     """``problem`` followed by the Blender wording of ``remedy`` (a key or None)."""
     text = remedy_text(remedy)
     return problem if text is None else f"{problem}: {text}"
 
 
-def message(exc):
+def message(exc: BaseException) -> str:
     """The user-facing text of a ``ConformalError`` (or any exception: its ``str``)."""
     problem = getattr(exc, 'problem', None)
     if problem is None:
@@ -43,7 +43,7 @@ def message(exc):
     return compose(problem, getattr(exc, 'remedy', None))
 
 
-def island_error(rep):
+def island_error(rep: dict) -> str | None:
     """The user-facing text of a failed island's report (``error_problem``/``error_remedy`` keys set
     by the core), or None if the island did not fail."""
     if 'error' not in rep:
