@@ -2,21 +2,14 @@
 
 All reads and writes use ``foreach_get``/``foreach_set`` on attribute arrays with matching dtypes
 (float32 positions and UVs, int32 corner vertices), which is about 100x faster than the per-element
-collections (DESIGN.md section 9). Everything works on the *base* mesh ``object.data``: modifiers are
-ignored.
+collections (docs/blender.md, "Mesh I/O cost"). Everything works on the *base* mesh ``object.data``:
+modifiers are ignored.
 
-Edit mode: ``mesh.attributes`` then refers to the edit-mode BMesh, whose layers are not the mesh arrays.
-Wrap the whole read-compute-write job in ``object_mode(obj)``: it leaves Edit (or any other) mode,
-which writes the edit mesh back, and returns to the user's mode afterwards, also on failure. Selection
-lives in the mesh's own attributes, so it survives the round trip.
-
-Typical use in an operator::
-
-    with object_mode(obj):
-        md = read_mesh(obj)                 # V, corner_verts, sizes, triangles
-        result = compute(md.V, md.F)        # may raise ConformalError: nothing written yet
-        write_uv(obj.data, result.uv[md.corner_verts])
-        write_point_float(obj.data, 'name', values)
+Edit mode: ``mesh.attributes`` then refers to the edit-mode BMesh, whose layers are not the mesh
+arrays. Wrap the whole read-compute-write job in ``object_mode(obj)``: it leaves Edit (or any other)
+mode, which writes the edit mesh back, and returns to the user's mode afterwards, also on failure.
+Selection lives in the mesh's own attributes, so it survives the round trip. Typical use:
+``with object_mode(obj): md = read_mesh(obj); ...; write_uv(obj.data, loop_uv)``.
 """
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -91,11 +84,21 @@ def object_mode(obj):
 
 
 # --- reading -------------------------------------------------------------------------------------
+FLT_MAX = float(np.finfo(np.float32).max)
+
+
 def read_positions(me):
-    """(n,3) float64 vertex positions of mesh ``me`` (call in Object mode)."""
+    """(n,3) float64 vertex positions of mesh ``me`` (call in Object mode). A coordinate at +-FLT_MAX
+    is read as +-inf: it is what Blender stores when "inf" is typed into a number field (the UI clamps
+    to the float32 range), and it must be reported as an infinite coordinate, not as a vertex so far
+    away that every face looks degenerate."""
     buf = np.empty(len(me.vertices) * 3, np.float32)
     me.attributes['position'].data.foreach_get('vector', buf)
-    return buf.reshape(-1, 3).astype(np.float64)
+    V = buf.reshape(-1, 3).astype(np.float64)
+    big = np.abs(V) >= FLT_MAX
+    if big.any():
+        V[big] = np.copysign(np.inf, V[big])
+    return V
 
 
 def read_corner_verts(me):
@@ -241,7 +244,9 @@ def bake_scalar(me, name, values, colormap_name='PERCEPTUAL', log=True, centre=N
 
 # --- per-face to per-vertex ----------------------------------------------------------------------
 def face_to_vertex(F, values, weights, n, power=1.0):
-    """Weighted mean at each of the ``n`` vertices of per-triangle ``values`` (m,) over the triangles
+    """Deprecated, kept only for ``ops_sphere`` until it switches to ``core.mesh.measures.vertex_mu``
+    (the one per-vertex mu, an area-weighted geometric mean); nothing else in the add-on may use it.
+    Weighted mean at each of the ``n`` vertices of per-triangle ``values`` (m,) over the triangles
     ``F`` (m,3) around it, with ``weights`` (m,) (e.g. areas). With ``power`` p it averages v**p and
     returns the p-th root (p = 2 for conformal factors: the vertex value is then sqrt(UV area / 3D area)
     of the vertex's star). Vertices in no triangle get NaN."""

@@ -28,7 +28,9 @@ from ..core.disk.flatten import flatten
 from ..core.geodesic.solver import face_mu, geodesic_distance
 from . import meshio
 from .colormap import colormap
-from .ops_flatten import BOUNDARY_ITEMS, REPORT_KEY as FLATTEN_REPORT_KEY, mesh_hash
+from .apply import REPORT_KEY as FLATTEN_REPORT_KEY
+from .job import mesh_hash
+from .ops_flatten import BOUNDARY_ITEMS
 from .prefs import get_prefs
 
 REPORT_KEY = 'conformal_geodesic_report'
@@ -287,7 +289,7 @@ class _GeodesicPanel:
     bl_label = "Geodesic Distance"
 
     def draw(self, context):
-        from .ui import draw_report
+        from .sidebar import draw_report
         layout = self.layout
         settings = context.scene.conformal_geodesic
         flat = getattr(context.scene, 'conformal_flatten', None)
@@ -309,14 +311,14 @@ _registered = []
 
 
 def register():
-    from .ui import register_tool
+    from .sidebar import register_tool
     _registered[:] = register_tool(ConformalGeodesicSettings, 'conformal_geodesic',
                                    MESH_OT_conformal_geodesic_distance, _GeodesicPanel,
                                    'conformal_geodesic')
 
 
 def unregister():
-    from .ui import unregister_tool
+    from .sidebar import unregister_tool
     unregister_tool(ConformalGeodesicSettings, 'conformal_geodesic',
                     MESH_OT_conformal_geodesic_distance, _registered)
     _registered.clear()

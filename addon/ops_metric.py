@@ -19,7 +19,8 @@ from bpy.props import EnumProperty, FloatProperty, IntProperty, StringProperty
 from ..core.errors import ConformalError
 from ..core.metric import DEFAULT_CELLS, DEFAULT_NOISE, read_times, reconstruct
 from . import meshio
-from .ops_flatten import BOUNDARY_ITEMS, mesh_hash
+from .job import mesh_hash
+from .ops_flatten import BOUNDARY_ITEMS
 from .prefs import get_prefs
 
 ATTR_NAME = 'recovered_metric'            # FLOAT point attribute; colour: ATTR_NAME + '_color'
@@ -118,7 +119,7 @@ class MESH_OT_conformal_reconstruct_metric(bpy.types.Operator):
 
 def draw_section(layout, context):
     """The panel section: the button and the last report of the active mesh."""
-    from .ui import draw_report
+    from .sidebar import draw_report
     layout.operator(MESH_OT_conformal_reconstruct_metric.bl_idname, icon='FILE')
     obj = context.active_object
     report = meshio.load_report(obj.data, REPORT_KEY) if obj is not None and obj.type == 'MESH' else None
@@ -137,12 +138,12 @@ CLASSES = (MESH_OT_conformal_reconstruct_metric,)
 def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
-    from . import ui
-    ui.add_section("Metric from Travel Times", draw_section)
+    from .sidebar import add_section
+    add_section("Metric from Travel Times", draw_section)
 
 
 def unregister():
-    from . import ui
-    ui.remove_section(draw_section)
+    from .sidebar import remove_section
+    remove_section(draw_section)
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

@@ -264,7 +264,7 @@ class _SpherePanel:
         return is_closed_mesh(context.active_object)
 
     def draw(self, context):
-        from .ui import draw_report
+        from .sidebar import draw_report
         layout = self.layout
         settings = context.scene.conformal_sphere
         col = layout.column()
@@ -284,12 +284,12 @@ _registered = []
 
 
 def register():
-    from .ui import register_tool
+    from .sidebar import register_tool
     _registered[:] = register_tool(ConformalSphereSettings, 'conformal_sphere', UV_OT_conformal_sphere,
                                    _SpherePanel, 'conformal_sphere')
 
 
 def unregister():
-    from .ui import unregister_tool
+    from .sidebar import unregister_tool
     unregister_tool(ConformalSphereSettings, 'conformal_sphere', UV_OT_conformal_sphere, _registered)
     _registered.clear()

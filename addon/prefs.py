@@ -1,6 +1,6 @@
 """Add-on preferences: the default grid size (used by the geodesic and metric tools), the colour map
-used when baking, and the size limit for flattening. ``get_prefs(context)`` works even when the add-on was registered by hand (tests, the
-bpy module), by falling back to the defaults."""
+used when baking, and the size limit for flattening. ``get_prefs(context)`` works even when the
+add-on was registered by hand (tests, the bpy module), by falling back to the defaults."""
 import bpy
 from bpy.props import EnumProperty, IntProperty
 

@@ -1,16 +1,10 @@
 """Sidebar panels (tab "Conformal") in the 3D Viewport and the UV Editor.
 
-The panel shows the flatten options (stored per scene in ``scene.conformal_flatten``), the button, and
-the last report of the active mesh: mu ratio, certified bound, flips, conformality, time.
-
-Hooks for other modules (geodesic, sphere, metric), which need no registration order:
-
-- ``add_section(label, draw)`` / ``remove_section(draw)``: ``draw(layout, context)`` is called under a
-  box with ``label`` in both panels, in the order sections were added. Call them from your module's
-  ``register()``/``unregister()``.
-- Or register your own sub-panels with ``bl_parent_id`` set to ``PARENT_IDS['VIEW_3D']`` and
-  ``PARENT_IDS['IMAGE_EDITOR']``.
-- ``draw_report(layout, report, rows)`` draws a stored report dict as label rows.
+The panel shows the flatten options (stored per scene in ``scene.conformal_flatten``), the button, the
+last report of the active mesh (mu ratio, certified bound, flips, conformality, time) and the sections
+other tools add. This module imports the operators; no operator imports it (the shared building
+blocks, ``add_section``, ``register_tool``, ``draw_report``, are in ``addon/sidebar.py`` and
+re-exported here).
 """
 
 import bpy
@@ -18,75 +12,8 @@ from bpy.props import BoolProperty, EnumProperty, PointerProperty
 
 from . import meshio
 from .ops_flatten import BOUNDARY_ITEMS, FIT_ITEMS, REPORT_KEY, UV_OT_conformal_flatten
-
-CATEGORY = "Conformal"
-PARENT_IDS = {'VIEW_3D': 'VIEW3D_PT_conformal_flatten', 'IMAGE_EDITOR': 'IMAGE_PT_conformal_flatten'}
-
-_sections = []          # (label, draw) pairs
-
-
-def sub_panel_classes(mixin, name):
-    """One sub-panel class per editor (3D Viewport and UV Editor sidebars, tab "Conformal") under the
-    main panel, from a ``mixin`` with ``bl_label`` and ``draw``; ``name`` gives their ``bl_idname``s
-    (``VIEW3D_PT_<name>``, ``IMAGE_PT_<name>``). Register and unregister them like any class."""
-    out = []
-    for space, parent in PARENT_IDS.items():
-        idname = f"{'VIEW3D' if space == 'VIEW_3D' else 'IMAGE'}_PT_{name}"
-        out.append(type(idname, (mixin, bpy.types.Panel), {
-            'bl_idname': idname, 'bl_space_type': space, 'bl_category': CATEGORY,
-            'bl_parent_id': parent}))
-    return out
-
-
-def register_tool(settings_cls, scene_attr, operator_cls, panel_mixin, panel_name):
-    """Register a tool: its settings as ``Scene.<scene_attr>``, its operator and its sidebar
-    sub-panels (``sub_panel_classes``). Returns the panel classes, for ``unregister_tool``."""
-    bpy.utils.register_class(settings_cls)
-    setattr(bpy.types.Scene, scene_attr, PointerProperty(type=settings_cls))
-    bpy.utils.register_class(operator_cls)
-    panels = sub_panel_classes(panel_mixin, panel_name)
-    for cls in panels:
-        bpy.utils.register_class(cls)
-    return panels
-
-
-def unregister_tool(settings_cls, scene_attr, operator_cls, panels):
-    """Undo ``register_tool``, in reverse order."""
-    for cls in reversed(panels):
-        bpy.utils.unregister_class(cls)
-    bpy.utils.unregister_class(operator_cls)
-    delattr(bpy.types.Scene, scene_attr)
-    bpy.utils.unregister_class(settings_cls)
-
-
-def add_section(label, draw):
-    """Add ``draw(layout, context)`` as a boxed section called ``label`` to both panels."""
-    remove_section(draw)
-    _sections.append((label, draw))
-
-
-def remove_section(draw):
-    """Remove a section added with ``add_section`` (no error if absent)."""
-    _sections[:] = [(lab, d) for lab, d in _sections if d is not draw]
-
-
-def _fmt(x, spec='.4g'):
-    if x is None:
-        return "-"
-    if isinstance(x, (int, float)):
-        return format(x, spec)
-    return str(x)
-
-
-def draw_report(layout, report, rows):
-    """Draw ``rows``, a list of (label, key or callable(report) -> str), from ``report`` (dict)."""
-    col = layout.column(align=True)
-    for label, key in rows:
-        value = key(report) if callable(key) else _fmt(report.get(key))
-        row = col.row()
-        row.label(text=label)
-        row.label(text=value)
-
+from .sidebar import (CATEGORY, PARENT_IDS, add_section, draw_report, fmt as _fmt,  # noqa: F401
+                      register_tool, remove_section, sections, sub_panel_classes, unregister_tool)
 
 def geodesic_solver_label():
     """Which eikonal solver geodesic distances will use (``core.geodesic.solver.solver_name``)."""
@@ -137,7 +64,7 @@ class _ConformalPanel:
             draw_report(box, report, FLATTEN_ROWS)
         layout.label(text=f"Geodesic solver: {geodesic_solver_label()}")
 
-        for label, draw in list(_sections):
+        for label, draw in sections():
             sub = layout.box()
             sub.label(text=label)
             try:
@@ -156,6 +83,36 @@ class IMAGE_PT_conformal_flatten(_ConformalPanel, bpy.types.Panel):
     bl_space_type = 'IMAGE_EDITOR'
 
 
+def _holes_text(r):
+    if r.get('holes_filled'):
+        return f"{r['holes_filled']} filled"
+    if r.get('holes_cut'):
+        return f"{r['holes_cut']} cut open"
+    return "none"
+
+
+ISLAND_ROWS = [
+    ("Islands", lambda r: f"{r['islands']}" + (f" ({r['islands_failed']} skipped)"
+                                               if r.get('islands_failed') else "")),
+    ("Holes", _holes_text),
+    ("Faces", lambda r: "selected" if r.get('selection') == 'selected faces' else "all"),
+    ("Packing", lambda r: {'pack_islands': "Pack Islands", 'shelf': "shelf",
+                           'none': "none (one disk)"}.get(r.get('packer'), "-")),
+    ("Objects", lambda r: str(len(r.get('objects') or [r.get('object')]))),
+]
+
+
+def draw_islands_section(layout, context):
+    """Sidebar section (``ui.add_section``): islands, holes and packing of the active mesh's last
+    flatten."""
+    obj = getattr(context, 'active_object', None)
+    report = meshio.load_report(obj.data, REPORT_KEY) if obj is not None and obj.type == 'MESH' else None
+    if report is None or 'islands' not in report:
+        layout.label(text="Seams split the mesh into islands")
+        return
+    draw_report(layout, report, ISLAND_ROWS)
+
+
 CLASSES = (ConformalFlattenSettings, VIEW3D_PT_conformal_flatten, IMAGE_PT_conformal_flatten)
 
 
@@ -163,9 +120,11 @@ def register():
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     bpy.types.Scene.conformal_flatten = PointerProperty(type=ConformalFlattenSettings)
+    add_section("Islands", draw_islands_section)
 
 
 def unregister():
+    remove_section(draw_islands_section)
     del bpy.types.Scene.conformal_flatten
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

@@ -42,7 +42,15 @@ def main(argv=None):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     pkg.register()
     from conformal_flatten.addon import meshio
-    from conformal_flatten.addon.ops_flatten import compute_flatten
+    from conformal_flatten.core import unwrap
+    from conformal_flatten.core.mesh.measures import vertex_mu
+
+    def compute_flatten(md, boundary, fit):
+        """core.unwrap of the whole mesh -> (result, per-corner UVs (c,2), per-vertex mu (n,))."""
+        res = unwrap(md.V, md.F, boundary=boundary.lower(), fit=fit.lower())
+        loop_uv = np.zeros((len(md.corner_verts), 2))
+        loop_uv[md.tri_corners.ravel()] = res.uv_corner.reshape(-1, 2)
+        return res, loop_uv, res.mu_vertex
     from conformal_flatten.core.surfaces import make_surface
 
     n = args.n
@@ -79,7 +87,7 @@ def main(argv=None):
     rows.append(('write per-corner UVs', t_uv))
     t_bake, _ = best(lambda: meshio.bake_scalar(me, 'conformal_factor', mu_v), rep)
     rows.append(('bake: FLOAT attribute + colour map + FLOAT_COLOR attribute', t_bake))
-    t_v2f, _ = best(lambda: meshio.face_to_vertex(md.F, result.mu, np.ones(ntri), len(md.V), 2.0), rep)
+    t_v2f, _ = best(lambda: vertex_mu(md.F, result.mu, np.ones(ntri), len(md.V)), rep)
     rows.append(('per-triangle mu -> per-vertex', t_v2f))
     io_total = t_read + t_tri + t_uv + t_bake + t_v2f
 

@@ -32,12 +32,28 @@ def _reset_blender():
     bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
+@pytest.fixture(autouse=True)
+def _fresh_blender_scene(request):
+    """Every test marked ``bpy`` (all add-on tests: ``pytestmark = pytest.mark.bpy``) starts from
+    Blender's factory settings with an empty scene, so no test sees another's objects or settings.
+    Autouse fixtures run before the others, so ``addon`` registers into the fresh scene."""
+    if request.node.get_closest_marker('bpy') is not None:
+        _reset_blender()
+        request.node._cf_scene_reset = True
+    yield
+
+
+def _reset_unless_done(request):
+    if not getattr(request.node, '_cf_scene_reset', False):
+        _reset_blender()
+
+
 @pytest.fixture
-def addon(bpy_pkg):
+def addon(bpy_pkg, request):
     """An empty factory scene with the add-on registered (and enabled in the preferences, so
     ``AddonPreferences`` work); unregistered afterwards. Yields the package module."""
     import bpy
-    _reset_blender()
+    _reset_unless_done(request)
     bpy_pkg.register()
     prefs_addons = bpy.context.preferences.addons
     entry = prefs_addons.get('conformal_flatten')
@@ -54,9 +70,9 @@ def addon(bpy_pkg):
 
 
 @pytest.fixture
-def blank_blender(bpy_pkg):
+def blank_blender(bpy_pkg, request):
     """An empty factory scene, add-on not registered (for register/unregister tests)."""
-    _reset_blender()
+    _reset_unless_done(request)
     yield bpy_pkg
 
 

@@ -5,6 +5,8 @@ import pytest
 
 from addon import colormap as cm
 
+pytestmark = pytest.mark.bpy
+
 
 def oklab_lightness(rgb_linear):
     """OKLab L of linear sRGB colours (k,3), computed independently of the module's inverse path."""

@@ -6,6 +6,7 @@ independently of the add-on (core triangulation + ``cut_along_seams`` on the sea
 mesh), and overlap between islands is tested exactly (separating axes) on every pair of triangles
 from different islands."""
 import json
+import re
 import types
 
 import bpy
@@ -14,6 +15,8 @@ import numpy as np
 import pytest
 
 from meshgen import two_holes
+
+pytestmark = pytest.mark.bpy
 
 
 # --- helpers -------------------------------------------------------------------------------------
@@ -256,7 +259,7 @@ def test_two_holes_filled(addon, bl):
     assert rep['holes_filled'] == 2 and rep['islands'] == 1 and rep['flips'] == 0
     assert rep['triangles'] == len(F)
     assert rep['island_reports'][0]['holes']['filled'] == 2
-    from conformal_flatten.addon.ops_flatten import summary_line
+    from conformal_flatten.addon.report import summary_line
     assert 'filled 2 holes' in summary_line(rep)
     W = loop_uv(me)[np.arange(3 * len(F)).reshape(-1, 3)]       # triangles: corners in order
     meas = island_measures(V, F, W)
@@ -423,7 +426,7 @@ def test_edit_mode_nothing_selected_flattens_everything(addon, bl):
 def test_several_objects_and_linked_duplicate(addon, bl):
     """Acceptance: two objects and a linked duplicate of one of them, flattened in one call; the
     shared mesh once."""
-    from conformal_flatten.addon import ops_flatten
+    from conformal_flatten.addon import job, targets
     from conformal_flatten.core.surfaces import make_surface
     sphere = sphere_with_seams(32, 16, name='Ball')
     dup = sphere.copy()                       # linked duplicate: shares sphere.data
@@ -433,20 +436,20 @@ def test_several_objects_and_linked_duplicate(addon, bl):
     grid = bl.mesh_object('Grid', V, F)       # active and selected alone
     sphere.select_set(True)
     dup.select_set(True)
-    targets = ops_flatten.target_objects(bpy.context)
-    assert [o.name for o, _ in targets] == ['Grid', 'Ball']
-    assert targets[1][1] == ['Ball', dup.name]
+    found = targets.target_objects(bpy.context)
+    assert [o.name for o, _ in found] == ['Grid', 'Ball']
+    assert found[1][1] == ['Ball', dup.name]
     calls = []
-    real = ops_flatten.compute_job
+    real = job.compute_job
 
-    def counting(job, *a, **k):
-        calls.append(job.obj.data.name)
-        return real(job, *a, **k)
-    ops_flatten.compute_job = counting
+    def counting(j, *a, **k):
+        calls.append(j.obj.data.name)
+        return real(j, *a, **k)
+    job.compute_job = counting
     try:
         assert bpy.ops.uv.conformal_flatten(boundary='AREA') == {'FINISHED'}
     finally:
-        ops_flatten.compute_job = real
+        job.compute_job = real
     assert sorted(calls) == ['Ball', 'Grid']                  # the shared mesh once
     assert report_of(sphere.data)['objects'] == ['Ball', dup.name]
     assert report_of(sphere.data)['packer'] == 'pack_islands'     # with another object active
@@ -509,7 +512,7 @@ def test_multi_object_edit_mode(addon, bl, packer):
 
 # --- packing fallback -------------------------------------------------------------------------------
 def test_pack_islands_failure_falls_back_to_shelf(addon, bl, monkeypatch):
-    from conformal_flatten.addon import ops_flatten
+    from conformal_flatten.addon import report, targets
     obj = sphere_with_seams(32, 16)
     me = obj.data
     bpy.ops.object.mode_set(mode='EDIT')
@@ -517,11 +520,11 @@ def test_pack_islands_failure_falls_back_to_shelf(addon, bl, monkeypatch):
     sel_before = _selection_attrs(me)
     def broken(context, objs):
         raise RuntimeError("Error: simulated poll failure")
-    monkeypatch.setattr(ops_flatten, '_in_edit_mode', broken)
+    monkeypatch.setattr(targets, 'in_edit_mode', broken)
     assert bpy.ops.uv.conformal_flatten(boundary='AREA') == {'FINISHED'}
     rep = report_of(me)
     assert rep['packer'] == 'shelf' and 'simulated poll failure' in rep['pack_note']
-    assert any('shelf' in w for w in ops_flatten.warnings_of([rep]))
+    assert any('shelf' in w for w in report.warnings_of([rep]))
     check_islands_layout(me)
     sel_after = _selection_attrs(me)
     for k, v in sel_before.items():
@@ -584,7 +587,8 @@ def test_modal_escape_and_timer(addon, bl):
     timer = object()
 
     def fake_operator(run):
-        return types.SimpleNamespace(_run=run, _timer=None, report=lambda kind, msg: reports.append((kind, msg)),
+        return types.SimpleNamespace(_run=run, _timer=None,
+                                     report=lambda kind, msg: reports.append((kind, msg)),
                                      _cleanup=lambda ctx: None, _done=lambda r: {'FINISHED'})
     run = _run_for_active(addon, boundary='AREA')
     run.read(bpy.context)
@@ -670,8 +674,8 @@ def test_loose_edge_refused_on_whole_mesh_only(addon, bl):
 
 
 def test_sidebar_islands_section(addon, bl):
-    from conformal_flatten.addon import ops_flatten, ui
-    assert any(d is ops_flatten.draw_islands_section for _, d in ui._sections)
+    from conformal_flatten.addon import sidebar, ui
+    assert any(d is ui.draw_islands_section for _, d in sidebar.sections())
     labels = []
 
     class Layout:
@@ -682,10 +686,36 @@ def test_sidebar_islands_section(addon, bl):
         def label(self, text='', **k):
             labels.append(text)
     bpy.ops.mesh.primitive_monkey_add()
-    ops_flatten.draw_islands_section(Layout(), bpy.context)
+    ui.draw_islands_section(Layout(), bpy.context)
     assert labels == ["Seams split the mesh into islands"]
     bpy.ops.uv.conformal_flatten(boundary='AREA', packer='SHELF')
     labels.clear()
-    ops_flatten.draw_islands_section(Layout(), bpy.context)
+    ui.draw_islands_section(Layout(), bpy.context)
     assert labels == ["Islands", "3", "Holes", "1 filled", "Faces", "all", "Packing", "shelf",
                       "Objects", "1"]
+
+
+def test_skip_bad_islands_skips_a_closed_object(addon, bl, capfd):
+    """Issue 12: with Skip Bad Islands a closed object among the selected ones is skipped with a
+    WARNING (its data untouched); the other objects are flattened."""
+    a = sphere_with_seams(32, 16, name='A')
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, location=(6, 0, 0))   # closed
+    c = bpy.context.object
+    a.select_set(True)
+    before = bl.mesh_snapshot(c.data)
+    capfd.readouterr()
+    assert bpy.ops.uv.conformal_flatten(boundary='AREA', skip_bad_islands=True) == {'FINISHED'}
+    out = capfd.readouterr().out
+    assert re.search(r"Warning: skipped object 'Sphere': island 1 of 1 .* is closed.*Mark Seam", out), out
+    bl.assert_same(before, bl.mesh_snapshot(c.data))
+    rep = report_of(a.data)
+    assert rep['islands'] == 2 and rep['flips'] == 0
+    assert rep['skipped_objects'][0]['object'] == 'Sphere'
+    assert rep['skipped_objects'][0]['error_code'] == 'no_boundary'
+    check_islands_layout(a.data)
+    # alone, the closed object is still an error (nothing can be flattened)
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o is c)
+    bpy.context.view_layer.objects.active = c
+    with pytest.raises(RuntimeError, match='is closed'):
+        bpy.ops.uv.conformal_flatten(boundary='AREA', skip_bad_islands=True)

@@ -5,6 +5,8 @@ import bpy
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.bpy
+
 N = 17          # flat grid: geodesics are straight lines, so times = c * distance are exact
 
 
@@ -38,8 +40,8 @@ def point_float(me, name):
 def test_operator_registered(addon):
     assert hasattr(bpy.ops.mesh, 'conformal_reconstruct_metric')
     from conformal_flatten.addon import ops_metric
-    from conformal_flatten.addon import ui
-    assert any(d is ops_metric.draw_section for _, d in ui._sections)
+    from conformal_flatten.addon import sidebar
+    assert any(d is ops_metric.draw_section for _, d in sidebar.sections())
 
 
 @pytest.mark.parametrize('mode', ['OBJECT', 'EDIT'])

@@ -8,6 +8,8 @@ import pytest
 
 from test_addon import _fails_unchanged
 
+pytestmark = pytest.mark.bpy
+
 
 def _grid(n=5):
     t = np.linspace(-1, 1, n)
@@ -68,8 +70,10 @@ def test_bad_mesh_fails_unchanged(addon, bl, name, mode):
 
 
 @pytest.mark.parametrize('mode', ['OBJECT', 'EDIT'])
-@pytest.mark.parametrize('value', [np.nan, np.inf])
+@pytest.mark.parametrize('value', [np.nan, np.inf, -np.finfo(np.float32).max])
 def test_non_finite_coordinates_fail_unchanged(addon, bl, value, mode):
+    """NaN, inf, and -FLT_MAX (what Blender stores when "-inf" is typed into a number field; issue 12:
+    it was reported as "zero-area faces") are all named as non-finite coordinates."""
     V, polys = _grid()
     obj = bl.mesh_object('nan', V, polys)
     pos = np.empty(3 * len(V), np.float32)
@@ -124,3 +128,20 @@ def test_mesh_over_size_limit_fails_unchanged(addon, bl, mode):
     finally:
         prefs.max_faces = 5_000_000
     bpy.ops.uv.conformal_flatten(boundary='AREA')       # within the limit again: it works
+
+
+@pytest.mark.parametrize('mode', ['OBJECT', 'EDIT'])
+def test_infinite_coordinate_with_seams_named(addon, bl, mode):
+    """Issue 12: an infinite coordinate is reported as such, also when seams send the mesh through
+    the island pipeline (not as "zero-area faces")."""
+    V, polys = _grid()
+    obj = bl.mesh_object('inf', V, polys)
+    me = obj.data
+    seam = np.zeros(len(me.edges), bool)
+    seam[0] = True
+    me.edges.foreach_set('use_seam', seam)
+    pos = np.empty(3 * len(V), np.float32)
+    me.attributes['position'].data.foreach_get('vector', pos)
+    pos[3 * 12] = np.finfo(np.float32).max          # "inf" typed into Blender's UI
+    me.attributes['position'].data.foreach_set('vector', pos)
+    _fails_unchanged(bl, r'NaN or infinite coordinates \(vertices 12\): fix or delete', mode)

@@ -5,6 +5,8 @@ import bpy
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.bpy
+
 
 def closed_object(bl, freq=6, name='blob'):
     from conformal_flatten.core.surfaces import blob

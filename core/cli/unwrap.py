@@ -1,6 +1,8 @@
 """``python -m core unwrap IN.obj OUT.obj [--seams SEAMS.txt | --seams-from-uv] [--holes fill|cut|error]
 [--boundary uniform|area|free] [--json]``: cut a mesh into islands along seams, flatten every island
-conformally, pack the islands and write an OBJ with one ``vt`` per island corner (``f v/vt``).
+conformally, pack the islands and write an OBJ with one ``vt`` per island corner (``f v/vt``). It calls
+``core.unwrap`` (a mesh that is one disk without seams is flattened directly); ``--json`` prints the
+summary, the islands and the ``warnings`` (also printed on stderr as ``warning: ...`` lines).
 
 SEAMS.txt holds one seam edge per line, two vertex numbers as in the OBJ's ``f`` lines (1-based);
 blank lines and text after ``#`` are ignored. Without seams, every connected piece is one island."""
@@ -11,7 +13,8 @@ import numpy as np
 
 from ..errors import ConformalError
 from ..disk.flatten import BOUNDARY_MODES
-from ..atlas.islands import FITS, HOLE_MODES, ISLAND_SCALES, seams_from_corner_ids, unwrap
+from ..atlas.islands import FITS, HOLE_MODES, ISLAND_SCALES, seams_from_corner_ids
+from ..atlas.unwrap import unwrap
 from ..io.obj import text_lines, read_obj, write_obj
 from ..mesh.triangulate import triangulate
 from ..mesh.validate import DEFAULT_MAX_FACES
@@ -33,7 +36,8 @@ def add_arguments(p):
     p.add_argument('--island-scale', choices=ISLAND_SCALES, default='true',
                    help='true: one texel density on all islands (default); normalise: equal UV area each')
     p.add_argument('--fit', choices=FITS, default='unit_square',
-                   help='unit_square: the packed layout scaled into [0,1]^2 (default); true_scale: mesh units')
+                   help='unit_square: the packed layout scaled into [0,1]^2 (default); true_scale: mesh '
+                        'units')
     p.add_argument('--no-pack', action='store_true', help='leave every island centred where it was flattened')
     p.add_argument('--margin', type=float, default=0.01, help='gap between packed islands, a fraction of '
                    'the layout size (default 0.01)')
@@ -109,7 +113,7 @@ def run(args):
                  on_error='skip' if args.skip_bad else 'raise', tri_poly=tri_poly)
     # per-corner vt: every polygon corner takes the split vertex of its triangles' corner
     corner_vt = np.full(len(mesh.corner_verts), -1, np.int64)
-    corner_vt[tri_corners.ravel()] = res.F.ravel()
+    corner_vt[tri_corners.ravel()] = res.F_uv.ravel()
     polys = mesh.polygons()
     uv_polys = np.split(corner_vt, np.cumsum(mesh.sizes)[:-1])
     if (mesh.sizes == 3).all():
@@ -117,13 +121,12 @@ def run(args):
     write_obj(args.output, mesh.V, polys, UV=res.uv, UV_faces=uv_polys)
     r = res.report
     if args.json:
-        print(json.dumps({'summary': r, 'islands': res.islands}))
+        print(json.dumps({'summary': r, 'islands': res.islands, 'warnings': res.warnings}))
     else:
         print(f"{r['islands']} island(s), {r['flattened']} flattened ({args.boundary}), holes filled "
               f"{r['holes_filled']}, cut {r['holes_cut']}: flips {r['flips']}, overlaps {r['overlaps']}, "
-              f"worst qc_mean {r['qc_mean_worst']:.4f}, worst mu_ratio {r['mu_ratio_worst']:.4f}, "
-              f"{r['seconds']:.2f} s")
-    for isl in res.islands:
-        if 'error' in isl:
-            print(f"warning: skipped {isl['error']}", file=sys.stderr)
+              f"qc_mean {r['qc_mean']:.4f} (worst island {r['qc_mean_worst']:.4f}), mu_ratio "
+              f"{r['mu_ratio']:.4f} (worst island {r['mu_ratio_worst']:.4f}), {r['seconds']:.2f} s")
+    for w in res.warnings:
+        print(f"warning: {w}", file=sys.stderr)
     return 0

@@ -1,0 +1,283 @@
+"""``core.unwrap``: the single entry for UV work (a disk, islands cut along seams, holes, a face
+selection). Front ends (the Blender add-on, ``python -m core unwrap``) call it and never look at the
+topology themselves.
+
+What it does:
+
+1. Selection: with ``faces`` ((m,) bool) only those triangles are unwrapped; they are taken out as a
+   sub-mesh (vertices renumbered, seams restricted to it) and the results are put back in the input's
+   numbering. The input arrays are never modified.
+2. Dispatch: a clean sub-mesh that is one disk (one piece, one boundary loop, Euler characteristic 1)
+   without seams is flattened directly by the disk primitive ``core.disk.flatten.flatten`` with the
+   requested fit (no packing: there is nothing to pack). Everything else (seams, several pieces,
+   holes, closed parts, messy input) goes through the island pipeline
+   ``core.atlas.islands.unwrap``, which repairs what it can and says what is wrong otherwise.
+3. Measures: the final layout is measured on the flattened triangles only (docs/math.md section 3):
+   flips, mu ratio, qc; the per-triangle conformal factor ``mu`` and the per-vertex one
+   (``core.mesh.measures.vertex_mu``, the area-weighted geometric mean) come with the result.
+4. Warnings: every island with flips, boundary overlaps, qc_mean above ``QC_WARN``, an optimiser
+   that did not converge, a failed certificate, or that failed and was skipped, gives one line in
+   ``warnings``. A result with warnings is not a plain success.
+
+Units: UVs are in mesh units for ``fit='true_scale'`` (UV area = 3D area), in [0,1]^2 for
+``fit='unit_square'``; ``mu`` is dimensionless (total UV area normalised to the 3D area).
+"""
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+import time
+
+import numpy as np
+
+from ..errors import ConformalError
+from ..disk.flatten import flatten
+from ..mesh import topology
+from ..mesh.geometry import face_areas
+from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, vertex_mu
+from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_loose_edges, check_mesh, normalise_scale
+from .islands import boundary_crossings, seam_pairs
+from .islands import unwrap as unwrap_islands
+
+QC_WARN = 1.5            # an island whose area-weighted mean quasi-conformal distortion exceeds this warns
+MEASURE_KEYS = ('faces', 'flips', 'mu_ratio', 'mu_ratio_p1_p99', 'qc_mean', 'qc_max')
+
+
+@dataclass
+class UnwrapResult:
+    """The result of ``unwrap`` for input triangles ``F`` (m,3) with ``n`` vertices.
+
+    - ``uv_corner`` (m,3,2) float64: UV of every corner of every input triangle; NaN on triangles that
+      were not unwrapped (outside ``faces``, or in an island skipped with ``on_error='skip'``).
+    - ``flattened`` (m,) bool: triangles that got UVs.
+    - ``face_island`` (m,) int64: island of each triangle (0-based, as in ``islands``); -1 outside
+      ``faces``.
+    - ``mu`` (m,) float64: realised conformal factor per triangle, NaN where not flattened.
+    - ``mu_vertex`` (n,) float64: per-vertex conformal factor (``vertex_mu``), NaN on vertices of no
+      flattened triangle.
+    - ``uv`` (N,2) and ``F_uv`` (m,3) int64: the same layout with shared UV vertices (one per island
+      corner, like OBJ ``vt``); ``F_uv`` is -1 outside ``faces``. ``uv[F_uv]`` equals ``uv_corner``
+      where flattened.
+    - ``islands``: list of per-island report dicts (``island`` 1-based, ``triangles``, measures,
+      ``warnings``; failed ones carry ``error``, ``error_problem``, ``error_code``, ``error_remedy``).
+    - ``report``: summary dict (measures of the whole layout, counts, ``path`` 'disk' or 'islands').
+    - ``warnings``: list of str, one per problem found (empty for a clean result)."""
+    uv_corner: np.ndarray
+    flattened: np.ndarray
+    face_island: np.ndarray
+    mu: np.ndarray
+    mu_vertex: np.ndarray
+    uv: np.ndarray
+    F_uv: np.ndarray
+    islands: list = field(default_factory=list)
+    report: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+
+
+def _select(V, F, faces, seams):
+    """The sub-mesh of the triangles ``faces`` ((m,) bool or None). Returns (sel (k,) triangle ids,
+    used (n_s,) input vertex ids, V_s, F_s, seams_s)."""
+    m, n = len(F), len(V)
+    S = seam_pairs(seams, n)
+    if faces is None:
+        return np.arange(m), np.arange(n), V, F, S
+    faces = np.asarray(faces)
+    if faces.shape != (m,) or faces.dtype != bool:
+        raise ConformalError(f"faces must be a boolean array with one entry per triangle ({m}), got "
+                             f"dtype {faces.dtype} and shape {faces.shape}")
+    sel = np.nonzero(faces)[0]
+    if len(sel) == 0:
+        raise ConformalError("no face is selected: select the faces to unwrap", 'empty_mesh')
+    used = np.unique(F[sel])
+    remap = np.full(n, -1, np.int64)
+    remap[used] = np.arange(len(used))
+    S = remap[S]
+    S = S[(S >= 0).all(1)] if len(S) else S
+    return sel, used, V[used], remap[F[sel]], S
+
+
+def _plain_disk(V, F, seams, max_faces, allow_loose):
+    """(True, boundary loops) if the mesh is clean, one piece and one disk without seams; else
+    (False, None): the island pipeline then handles it (repairs, holes, or a precise error)."""
+    if len(seams):
+        return False, None
+    try:
+        info = check_mesh(V, F, kind='surface', max_faces=max_faces, allow_loose=allow_loose,
+                          allow_parts=True)
+    except ConformalError:
+        return False, None
+    if len(info.loops) != 1 or info.euler != 1:
+        return False, None
+    if topology.face_components(F, len(V))[0] != 1:
+        return False, None
+    return True, info.loops
+
+
+def _measure(V, F, uv_corner):
+    """docs/math.md section 3 measures of the triangles ``F`` (k,3) under the corner UVs ``uv_corner``
+    (k,3,2), as a triangle soup (split vertices need no bookkeeping). Returns (report dict, mu (k,))."""
+    k = len(F)
+    P = normalise_scale(V)[0][F].reshape(-1, 3)        # measures are scale invariant; no overflow
+    return measures_from_jacobians(*jacobians(P, np.arange(3 * k).reshape(k, 3), uv_corner.reshape(-1, 2)))
+
+
+def island_warnings(rep: dict, desc: str) -> list:
+    """Quality warnings of one island report (not its failure): flips, overlaps, qc_mean above
+    ``QC_WARN``, an optimiser that did not converge, a failed certificate."""
+    out = []
+    if rep.get('flips'):
+        out.append(f"{desc} has {rep['flips']} flipped triangle(s) (not one-to-one)")
+    if rep.get('overlaps'):
+        out.append(f"{desc} overlaps itself ({rep['overlaps']} boundary crossing(s))")
+    if rep.get('qc_mean') is not None and rep['qc_mean'] > QC_WARN:
+        out.append(f"{desc} is far from conformal (qc_mean {rep['qc_mean']:.3g} > {QC_WARN}): mesh too "
+                   "coarse or too distorted for a good conformal map")
+    if rep.get('converged') is False:
+        out.append(f"{desc}: the optimiser did not converge; the map is the best one found")
+    if rep.get('bound_note'):
+        out.append(f"{desc}: no certified bound ({rep['bound_note']})")
+    return out
+
+
+def _disk(V, F, loops, boundary, fit, max_faces, progress, options):
+    """The disk path: ``flatten`` with the requested fit. Returns (uv (n,2), mu (m,), island report)."""
+    res = flatten(V, F, boundary=boundary, fit=fit, max_faces=max_faces, progress=progress, **options)
+    if not np.isfinite(res.uv).all():
+        raise ConformalError("the flattening produced non-finite UVs: the mesh is numerically too "
+                             "degenerate", 'degenerate', 'clean_mesh')
+    r = res.report
+    rep = {'island': 1, 'triangles': int(len(F)), 'vertices': int(len(V)), 'loops': 1,
+           **{k: r[k] for k in MEASURE_KEYS if k in r},
+           'overlaps': boundary_crossings(res.uv, loops), 'area_3d': float(face_areas(V, F).sum())}
+    for k in ('bound_vertex', 'vertex_ratio', 'bound_note', 'converged', 'iterations'):
+        if k in r:
+            rep[k] = r[k]
+    rep['seconds'] = r.get('seconds', {}).get('total')
+    return res.uv, res.mu, rep
+
+
+def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'uniform', holes: str = 'fill',
+           fit: str = 'unit_square', island_scale: str = 'true', pack: bool = True, margin: float = 0.01,
+           on_error: str = 'raise', max_faces: int | None = DEFAULT_MAX_FACES, edges=None,
+           allow_loose: bool = False, progress: Callable[[float, str], None] | None = None,
+           **options) -> UnwrapResult:
+    """Unwrap the triangle mesh ``V`` (n,3) float, ``F`` (m,3) int (counter-clockwise) to UVs.
+
+    seams: (k,2) int vertex pairs cut open, or None. faces: optional (m,) bool, only these triangles
+    are unwrapped (the others get NaN UVs; seams outside them are ignored). tri_poly: optional (m,)
+    polygon of each triangle, to name polygons in messages. boundary: 'uniform', 'area' or 'free'.
+    holes: 'fill', 'cut' or 'error'. fit: 'unit_square' or 'true_scale' (mesh units, UV area = 3D
+    area). island_scale: 'true' (one texel density) or 'normalise' (equal UV area per island). pack:
+    shelf-pack several islands without overlap, ``margin`` a fraction of the layout size (one island
+    is never packed). on_error: 'raise' or 'skip' (islands that cannot be flattened are left out,
+    with a warning; if none can be flattened it raises). max_faces: size limit in triangles (None:
+    none). edges: optional (e,2) all edges of the mesh, refused if some lie in no face (whole-mesh
+    runs only). allow_loose: accept vertices in no face. progress: ``progress(fraction, message)``,
+    called between steps and islands; an exception it raises (e.g. a cancellation) propagates.
+    Extra ``options`` go to ``flatten`` (e.g. ``bound``, optimiser settings).
+
+    Returns ``UnwrapResult``. Raises ``ConformalError`` when no answer exists (the message names the
+    problem; ``exc.remedy`` says what to do)."""
+    t0 = time.perf_counter()
+    V, F = as_arrays(V, F)
+    m = len(F)
+    if tri_poly is not None:
+        tri_poly = np.asarray(tri_poly, np.int64)
+        if tri_poly.shape != (m,):
+            raise ConformalError(f"tri_poly must have one polygon index per triangle ({m}), got shape "
+                                 f"{tri_poly.shape}")
+    sel, used, Vs, Fs, Ss = _select(V, F, faces, seams)
+    whole = len(sel) == m
+    bad = ~np.isfinite(Vs).all(1)
+    if bad.any():            # first: coordinates that are not numbers make every other test meaningless
+        ex = ', '.join(str(int(v)) for v in used[np.nonzero(bad)[0][:5]])
+        raise ConformalError(f"mesh has {int(bad.sum())} vertex(es) with NaN or infinite coordinates "
+                             f"(vertices {ex})", 'bad_coordinates', 'fix_coordinates')
+    disk, loops = _plain_disk(Vs, Fs, Ss, max_faces, allow_loose)
+    if disk:
+        if edges is not None and whole:
+            check_loose_edges(edges, F)
+        uv_s, mu_s, rep = _disk(Vs, Fs, loops, boundary, fit, max_faces, progress, options)
+        uv_corner_s = uv_s[Fs]
+        F_uv_s, ok, isl = Fs, np.ones(len(Fs), bool), np.zeros(len(Fs), np.int64)
+        islands = [rep]
+        summary = {'islands': 1, 'flattened': 1, 'failed': 0, 'holes_filled': 0, 'holes_cut': 0,
+                   'packed': False, 'pack_efficiency': None, 'seconds': rep['seconds'],
+                   **{k: rep[k] for k in MEASURE_KEYS}}
+        for k in ('bound_vertex', 'vertex_ratio'):
+            summary[k] = rep.get(k)
+    else:
+        res = unwrap_islands(Vs, Fs, seams=Ss, boundary=boundary, holes=holes, island_scale=island_scale,
+                             pack=pack, margin=margin, fit=fit, max_faces=max_faces, allow_loose=allow_loose,
+                             edges=edges if whole else None, on_error=on_error,
+                             tri_poly=None if tri_poly is None else tri_poly[sel], strict_seams=whole,
+                             progress=progress, **options)
+        ok = np.asarray(res.ok, bool)
+        uv_corner_s = res.uv[res.F]
+        if not np.isfinite(uv_corner_s[ok]).all():
+            raise ConformalError("the flattening produced non-finite UVs: the mesh is numerically too "
+                                 "degenerate", 'degenerate', 'clean_mesh')
+        F_uv_s, uv_s, isl, islands = res.F, res.uv, res.face_island, res.islands
+        meas, mu_ok = _measure(Vs, Fs[ok], uv_corner_s[ok])
+        mu_s = np.full(len(Fs), np.nan)
+        mu_s[ok] = mu_ok
+        summary = {k: v for k, v in res.report.items() if k not in ('triangles', 'vertices')}
+        summary.update({k: meas[k] for k in MEASURE_KEYS})
+        one = [r for r in islands if 'error' not in r]
+        summary['bound_vertex'] = one[0].get('bound_vertex') if len(islands) == 1 and one else None
+        summary['vertex_ratio'] = one[0].get('vertex_ratio') if len(islands) == 1 and one else None
+    # back to the input's numbering
+    uv_corner = np.full((m, 3, 2), np.nan)
+    uv_corner[sel[ok]] = uv_corner_s[ok]
+    flattened = np.zeros(m, bool)
+    flattened[sel[ok]] = True
+    face_island = np.full(m, -1, np.int64)
+    face_island[sel] = isl
+    mu = np.full(m, np.nan)
+    mu[sel] = mu_s
+    F_uv = np.full((m, 3), -1, np.int64)
+    F_uv[sel] = F_uv_s
+    A = face_areas(Vs, Fs)
+    mu_vertex = np.full(len(V), np.nan)
+    mu_vertex[used] = vertex_mu(Fs, mu_s, A, len(Vs))
+    # warnings, in the core's wording
+    warnings = []
+    n_isl = len(islands)
+    for r in islands:
+        desc = "the map" if n_isl == 1 else f"island {r['island']} of {n_isl}"
+        if 'error' in r:
+            warnings.append(f"skipped {r['error']}")
+            continue
+        r['warnings'] = island_warnings(r, desc)
+        warnings += r['warnings']
+    summary.update({'path': 'disk' if disk else 'islands', 'boundary': boundary, 'fit': fit,
+                    'holes': holes, 'island_scale': island_scale, 'triangles': int(m),
+                    'vertices': int(len(V)), 'selected_triangles': int(len(sel)),
+                    'flattened_triangles': int(flattened.sum()), 'seams': int(len(Ss)),
+                    'overlaps': int(sum(r.get('overlaps', 0) for r in islands if 'error' not in r)),
+                    'qc_mean_worst': float(max(r['qc_mean'] for r in islands if 'error' not in r)),
+                    'mu_ratio_worst': float(min(r['mu_ratio'] for r in islands if 'error' not in r)),
+                    'seconds': round(time.perf_counter() - t0, 4),
+                    'mu_range': [float(np.nanmin(mu_s)), float(np.nanmax(mu_s))],
+                    'warnings': len(warnings)})
+    return UnwrapResult(uv_corner=uv_corner, flattened=flattened, face_island=face_island, mu=mu,
+                        mu_vertex=mu_vertex, uv=uv_s, F_uv=F_uv, islands=islands, report=summary,
+                        warnings=warnings)
+
+
+def true_scale(parts: Sequence[tuple]) -> list:
+    """Scale UV layouts to mesh units with one common factor: after the scaling the total UV area of
+    all ``parts`` equals their total 3D area (one texel density across them).
+
+    ``parts``: sequence of (V (n,3), F (k,3), uv_corner (k,3,2)) with the 3D triangles and their
+    corner UVs (e.g. after an external packer fitted them into the unit square). Returns the list of
+    scaled ``uv_corner`` arrays (float64), unchanged if the UV area is not positive."""
+    a3 = sum(float(face_areas(np.asarray(V, np.float64), np.asarray(F, np.int64)).sum()) for V, F, _ in parts)
+    auv = 0.0
+    for _, _, W in parts:
+        W = np.asarray(W, np.float64)
+        k = len(W)
+        auv += float(np.abs(signed_uv_areas(W.reshape(-1, 2), np.arange(3 * k).reshape(k, 3))).sum())
+    out = [np.asarray(W, np.float64) for _, _, W in parts]
+    if not auv > 0:
+        return out
+    s = np.sqrt(a3 / auv)
+    return [W * s for W in out]
