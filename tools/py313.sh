@@ -11,16 +11,26 @@
 # Needs root (debootstrap, mount, chroot) and Debian's package mirror; pip reaches PyPI with this machine's
 # own pip configuration (config files, PIP_* variables, local file:// indexes and find-links), replicated
 # inside the root. The root lives in $PY313_CACHE (default /var/cache/conformal-flatten/py313), one folder
-# per key: a hash of requirements-blender52.txt and of how the root is built (suite, Debian packages, LAYOUT),
-# so a change to either builds afresh and an unchanged key is reused across clones and worktrees (roots of older keys stay: remove them by hand). All mounts live in a private mount namespace
-# (unshare -m), so they vanish with the command even when it is killed.
+# per key: a hash of requirements-blender52.txt and of how the root is built (suite, Debian packages,
+# LAYOUT), so a change to either builds afresh and an unchanged key is reused across clones and worktrees
+# (roots of older keys stay: remove them by hand). All mounts live in a private mount namespace
+# (unshare -m), so they vanish with the command even when it is killed. The Debian mirror is the host's
+# (its apt sources), or $DEBIAN_MIRROR.
 set -euo pipefail
 ROOT_DIR=$(cd "$(dirname "$0")/.." && pwd)
 REQ="$ROOT_DIR/requirements-blender52.txt"
 CACHE=${PY313_CACHE:-/var/cache/conformal-flatten/py313}
 SUITE=trixie
-MIRROR=${DEBIAN_MIRROR:-http://deb.debian.org/debian}
-APT_PACKAGES="python3.13 python3.13-venv python3.13-dev build-essential ca-certificates"
+host_mirror() {           # the first Debian (non-security) mirror in the host's apt sources
+    cat /etc/apt/sources.list /etc/apt/sources.list.d/*.list /etc/apt/sources.list.d/*.sources 2>/dev/null \
+        | grep -oE 'https?://[^ ]+/debian/?( |$)' | grep -v security | head -n 1 | tr -d ' '
+}
+MIRROR=${DEBIAN_MIRROR:-$(host_mirror)}
+MIRROR=${MIRROR:-http://deb.debian.org/debian}
+# Python 3.13 with headers and a compiler (scikit-fmm's sdist), and the X11/GL libraries bpy links to
+APT_PACKAGES="python3.13 python3.13-venv python3.13-dev build-essential ca-certificates \
+libx11-6 libxext6 libxfixes3 libxi6 libxrender1 libxt6t64 libsm6 libice6 libxkbcommon0 libxxf86vm1 \
+libgl1 libglx0 libopengl0 libegl1"
 VENV=/opt/venv            # inside the root
 
 LAYOUT=1                  # bump when the way the root is built changes
@@ -63,6 +73,7 @@ in_root() {
     mount --make-rslave "$dir/dev"
     mkdir -p "$dir/sys" && mount --rbind /sys "$dir/sys" && mount --make-rslave "$dir/sys"
     cp -L /etc/resolv.conf "$dir/etc/resolv.conf"
+    [ -e "$dir/etc/mtab" ] || ln -s /proc/self/mounts "$dir/etc/mtab"
     local p
     for p in $(pip_paths); do
         if [ -d "$p" ]; then
@@ -108,7 +119,8 @@ setup() {
         $APT_PACKAGES >/dev/null && apt-get clean"
     log "venv and pip install -r $(basename "$REQ")"
     in_namespace "$tmp" /bin/bash -c "python3.13 -m venv $VENV && $VENV/bin/python -m pip install -q --upgrade pip \
-        && $VENV/bin/python -m pip install -q -r '$REQ' && $VENV/bin/python -c 'import bpy, numpy, scipy, skfmm; \
+        && { $VENV/bin/python -m pip install -q -r '$REQ' 2>&1 | grep -v 'is ignored: it is neither a file nor a directory' >&2; \
+        test \${PIPESTATUS[0]} = 0; } && $VENV/bin/python -c 'import bpy, numpy, scipy, skfmm; \
 print(\"bpy\", bpy.app.version_string, \"python\", __import__(\"sys\").version.split()[0], \"numpy\", numpy.__version__, \
 \"scipy\", scipy.__version__)'"
     touch "$tmp/.ready"
