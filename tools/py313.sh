@@ -23,7 +23,7 @@ CACHE=${PY313_CACHE:-/var/cache/conformal-flatten/py313}
 SUITE=trixie
 host_mirror() {           # the first Debian (non-security) mirror in the host's apt sources
     cat /etc/apt/sources.list /etc/apt/sources.list.d/*.list /etc/apt/sources.list.d/*.sources 2>/dev/null \
-        | grep -oE 'https?://[^ ]+/debian/?( |$)' | grep -v security | head -n 1 | tr -d ' '
+        | grep -oE 'https?://[^ ]+/debian/?( |$)' | grep -v security | head -n 1 | tr -d ' ' || true
 }
 MIRROR=${DEBIAN_MIRROR:-$(host_mirror)}
 MIRROR=${MIRROR:-http://deb.debian.org/debian}
