@@ -1,23 +1,31 @@
 """Build the Blender extension zips with Blender's own extension tool (``blender_ext.py`` from the bpy
-wheel, run with plain Python), one zip per platform, each with the third-party wheels it needs.
+wheel, run with plain Python): one zip per Python line and platform, each with the third-party wheels
+it needs and the range of Blender versions that runs that Python.
 
-    .venv/bin/python tools/package.py [--out dist] [--no-wheels]
+    .venv/bin/python tools/package.py [--out dist] [--python 3.11 --python 3.13] [--platform linux-x64]
+                                      [--no-wheels]
 
-Steps:
+Python lines (``PYTHON_LINES``; checked on PyPI: bpy 4.2.0-5.0.1 are cp311-only, bpy 5.1.0-5.2.3 cp313):
+- Python 3.11: Blender 4.2 LTS, 4.3, 4.4, 4.5 LTS and 5.0 (``blender_version_min = "4.2.0"``,
+  ``blender_version_max = "5.1.0"``, exclusive);
+- Python 3.13: Blender 5.1 and 5.2 LTS (``"5.1.0"`` to ``"5.3.0"``, exclusive).
+
+Steps, for each Python line:
 1. Fetch the wheels into ``wheels/`` (kept between runs, never committed):
    - scipy (pinned in requirements.txt) for every platform, ``pip download --only-binary=:all:``;
-   - scikit-fmm: the cp311 Windows wheel from PyPI, and the Linux wheel built here from the sdist
-     (PyPI has no Linux or macOS wheels). macOS gets none: the core's fallback eikonal solver is used.
+   - scikit-fmm: the Windows wheel from PyPI where there is one (cp311 only), and the Linux wheel built
+     from the sdist (PyPI has no Linux or macOS wheels): in this Python when it is that line, else in
+     the Python 3.13 root of ``tools/py313.sh`` (needs root; ``make package`` sets it up). Platforms
+     without a scikit-fmm wheel get none: the core's fallback eikonal solver is used.
    numpy is not shipped: Blender bundles it.
-2. Stage the extension in ``build/extension``: ``__init__.py``, ``core/``, ``addon/`` and a copy of
-   ``blender_manifest.toml`` with the ``wheels`` and ``platforms`` lists written in.
-3. ``blender_ext.py build --split-platforms`` into ``--out``, then ``blender_ext.py validate`` on each zip.
+2. Stage the extension in ``build/extension-pyXY``: ``__init__.py``, ``core/``, ``addon/`` and a copy of
+   ``blender_manifest.toml`` with the line's Blender range and the ``wheels`` and ``platforms`` lists.
+3. ``blender_ext.py build --split-platforms``, the zips renamed ``<id>-<version>-cpXY-<platform>.zip``
+   into ``--out``, then ``blender_ext.py validate`` on each zip. A table says which zip serves which
+   Blender versions.
 
-Blender 4.2 to 5.0 run Python 3.11 (checked on PyPI: bpy 4.2.0-5.0.1 are cp311-only, bpy 5.1 is
-cp313), so the wheels are cp311 and the manifest's ``blender_version_max`` is "5.1.0" (exclusive).
-
-``--no-wheels`` skips step 1 and builds one zip without wheels (for tests and development, where scipy
-comes from the Python environment). Exit code 0 on success, 1 on failure with one line on stderr."""
+``--no-wheels`` skips step 1 and builds one zip per line without wheels (development, where scipy
+comes from the Python environment). Exit code 0 on success, 1 on failure with a message on stderr."""
 import argparse
 import glob
 import os
@@ -28,7 +36,11 @@ import sys
 import tomllib
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-PYTHON_VERSION = '3.11'
+# Python line -> (blender_version_min, blender_version_max exclusive, the Blender releases in that range)
+PYTHON_LINES = {
+    '3.11': ('4.2.0', '5.1.0', '4.2 LTS, 4.3, 4.4, 4.5 LTS, 5.0'),
+    '3.13': ('5.1.0', '5.3.0', '5.1, 5.2 LTS'),
+}
 PLATFORMS = {
     # Blender platform: pip --platform tags, most specific first
     'linux-x64': ['manylinux_2_17_x86_64', 'manylinux2014_x86_64'],
@@ -38,10 +50,15 @@ PLATFORMS = {
 }
 STAGE_ITEMS = ['__init__.py', 'blender_manifest.toml', 'core', 'addon', 'LICENSE', 'LICENSE.txt',
                'COPYING']
+PY313 = os.path.join(ROOT, 'tools', 'py313.sh')
 
 
 class PackageError(Exception):
     pass
+
+
+def this_python():
+    return '{}.{}'.format(*sys.version_info[:2])
 
 
 def pinned(name):
@@ -81,48 +98,75 @@ def have(wheel_dir, pattern):
     return sorted(glob.glob(os.path.join(wheel_dir, pattern)))
 
 
-def fetch_wheels(wheel_dir, log=print):
-    """Download or build every wheel into ``wheel_dir`` (skipping those already there). Returns the
-    list of wheel paths to ship."""
+def _download(wheel_dir, spec, python, platform_tags):
+    cp = 'cp' + python.replace('.', '')
+    args = ['download', spec, '--no-deps', '--only-binary=:all:', '--python-version', python,
+            '--implementation', 'cp', '--abi', cp, '-d', wheel_dir]
+    for t in platform_tags:
+        args += ['--platform', t]
+    pip(*args)
+
+
+def _build_fmm_linux(wheel_dir, fmm_v, python, log):
+    """Build the Linux scikit-fmm wheel for ``python`` from the sdist: here when this Python is that
+    line, else inside the Python 3.13 root of tools/py313.sh (the repository is mounted there)."""
+    spec = ['wheel', f'scikit-fmm=={fmm_v}', '--no-deps', '--no-binary', 'scikit-fmm', '-w',
+            os.path.abspath(wheel_dir)]
+    if sys.platform == 'linux' and python == this_python():
+        log(f"building scikit-fmm {fmm_v} for linux-x64, Python {python}, from the sdist")
+        pip(*spec)
+        return
+    if sys.platform == 'linux' and python == '3.13':
+        ok = subprocess.run(['bash', PY313, 'ready'], capture_output=True, text=True)
+        if ok.returncode == 0:
+            log(f"building scikit-fmm {fmm_v} for linux-x64, Python 3.13, from the sdist in the "
+                f"Python 3.13 root (tools/py313.sh)")
+            run(['bash', PY313, 'run', 'python', '-m', 'pip', *spec, '--disable-pip-version-check'])
+            return
+        raise PackageError(
+            "the Linux scikit-fmm wheel for Python 3.13 (Blender 5.1, 5.2 LTS) is built from its sdist "
+            "in a Python 3.13 environment, and there is none here: " + (ok.stderr.strip() or "?") +
+            "\n  build it with `tools/py313.sh setup` (root, Debian packages; `make package` does it when "
+            "it can), or package the Python 3.11 line only: tools/package.py --python 3.11")
+    raise PackageError(f"the Linux scikit-fmm wheel for Python {python} is built from its sdist and "
+                       f"needs Linux and Python {python} (or the 3.13 root of tools/py313.sh)")
+
+
+def fetch_wheels(wheel_dir, python='3.11', platforms=None, log=print):
+    """Download or build every wheel for ``python`` and ``platforms`` into ``wheel_dir`` (skipping
+    those already there). Returns {platform: [wheel paths to ship]}."""
     os.makedirs(wheel_dir, exist_ok=True)
     scipy_v, fmm_v = pinned('scipy'), pinned('scikit-fmm')
-    pyver = PYTHON_VERSION.replace('.', '')
-    out = []
-    for plat, tags in PLATFORMS.items():
-        found = [w for w in have(wheel_dir, f'scipy-{scipy_v}-cp{pyver}-*.whl')
-                 if _wheel_platform_matches(w, plat)]
-        if not found:
-            log(f"downloading scipy {scipy_v} for {plat}")
-            args = ['download', f'scipy=={scipy_v}', '--no-deps', '--only-binary=:all:',
-                    '--python-version', PYTHON_VERSION, '--implementation', 'cp', '--abi', f'cp{pyver}',
-                    '-d', wheel_dir]
-            for t in tags:
-                args += ['--platform', t]
-            pip(*args)
-            found = [w for w in have(wheel_dir, f'scipy-{scipy_v}-cp{pyver}-*.whl')
-                     if _wheel_platform_matches(w, plat)]
-        if not found:
-            raise PackageError(f"no scipy {scipy_v} wheel for {plat}")
-        out.append(found[0])
-    # scikit-fmm: Windows wheel from PyPI, Linux wheel built from the sdist, nothing for macOS.
-    win = have(wheel_dir, f'scikit_fmm-{fmm_v}-cp{pyver}-*win_amd64.whl')
-    if not win:
-        log(f"downloading scikit-fmm {fmm_v} for windows-x64")
-        pip('download', f'scikit-fmm=={fmm_v}', '--no-deps', '--only-binary=:all:', '--python-version',
-            PYTHON_VERSION, '--implementation', 'cp', '--abi', f'cp{pyver}', '--platform', 'win_amd64',
-            '-d', wheel_dir)
-        win = have(wheel_dir, f'scikit_fmm-{fmm_v}-cp{pyver}-*win_amd64.whl')
-    lin = have(wheel_dir, f'scikit_fmm-{fmm_v}-cp{pyver}-*linux_x86_64.whl')
-    if not lin:
-        if sys.platform != 'linux' or sys.version_info[:2] != (3, 11):
-            raise PackageError("the Linux scikit-fmm wheel is built from its sdist and needs Linux and "
-                               "Python 3.11: run `make package` there")
-        log(f"building scikit-fmm {fmm_v} for linux-x64 from the sdist")
-        pip('wheel', f'scikit-fmm=={fmm_v}', '--no-deps', '--no-binary', 'scikit-fmm', '-w', wheel_dir)
-        lin = have(wheel_dir, f'scikit_fmm-{fmm_v}-cp{pyver}-*linux_x86_64.whl')
-    if not win or not lin:
-        raise PackageError("scikit-fmm wheels missing after download/build")
-    return out + [win[0], lin[0]]
+    cp = 'cp' + python.replace('.', '')
+    out = {}
+    for plat in platforms or PLATFORMS:
+        def scipy_here():
+            return [w for w in have(wheel_dir, f'scipy-{scipy_v}-{cp}-*.whl') if _wheel_platform_matches(w, plat)]
+        if not scipy_here():
+            log(f"downloading scipy {scipy_v} for {plat}, Python {python}")
+            _download(wheel_dir, f'scipy=={scipy_v}', python, PLATFORMS[plat])
+        if not scipy_here():
+            raise PackageError(f"no scipy {scipy_v} wheel for {plat}, Python {python}")
+        out[plat] = [scipy_here()[0]]
+    # scikit-fmm: Windows wheel from PyPI (cp311 only), Linux wheel built from the sdist, none for macOS.
+    if 'windows-x64' in out:
+        win = have(wheel_dir, f'scikit_fmm-{fmm_v}-{cp}-*win_amd64.whl')
+        if not win and python == '3.11':
+            log(f"downloading scikit-fmm {fmm_v} for windows-x64, Python {python}")
+            _download(wheel_dir, f'scikit-fmm=={fmm_v}', python, ['win_amd64'])
+            win = have(wheel_dir, f'scikit_fmm-{fmm_v}-{cp}-*win_amd64.whl')
+            if not win:
+                raise PackageError(f"no scikit-fmm {fmm_v} wheel for windows-x64, Python {python}")
+        out['windows-x64'] += win[:1]
+    if 'linux-x64' in out:
+        lin = have(wheel_dir, f'scikit_fmm-{fmm_v}-{cp}-*linux_x86_64.whl')
+        if not lin:
+            _build_fmm_linux(wheel_dir, fmm_v, python, log)
+            lin = have(wheel_dir, f'scikit_fmm-{fmm_v}-{cp}-*linux_x86_64.whl')
+        if not lin:
+            raise PackageError(f"the scikit-fmm wheel for linux-x64, Python {python}, is missing after the build")
+        out['linux-x64'] += lin[:1]
+    return out
 
 
 def _wheel_platform_matches(path, plat):
@@ -132,10 +176,16 @@ def _wheel_platform_matches(path, plat):
             'macos-x64': tag.startswith('macosx') and tag.endswith('x86_64')}[plat]
 
 
-def manifest_with(text, wheels, platforms):
-    """The manifest ``text`` with top-level ``wheels`` and ``platforms`` arrays replaced/added."""
+def manifest_with(text, wheels, platforms, versions=None):
+    """The manifest ``text`` with top-level ``wheels`` and ``platforms`` arrays replaced/added, and,
+    given ``versions`` = (min, max), ``blender_version_min``/``blender_version_max`` set to them."""
     for key in ('wheels', 'platforms'):
         text = re.sub(rf'(?ms)^{key}\s*=\s*\[.*?\]\s*\n', '', text)
+    if versions is not None:
+        for key, value in zip(('blender_version_min', 'blender_version_max'), versions):
+            text, n = re.subn(rf'(?m)^{key}\s*=\s*"[^"]*"', f'{key} = "{value}"', text)
+            if n != 1:
+                raise PackageError(f"blender_manifest.toml has no single top-level {key}")
     if wheels:       # the repository excludes its wheel cache; the staged copy ships wheels/
         text = re.sub(r'(?m)^\s*"/wheels/",?\s*\n', '', text)
     extra = ''
@@ -149,7 +199,7 @@ def manifest_with(text, wheels, platforms):
     return text
 
 
-def stage(stage_dir, wheels, platforms):
+def stage(stage_dir, wheels, platforms, versions=None):
     if os.path.exists(stage_dir):
         shutil.rmtree(stage_dir)
     os.makedirs(stage_dir)
@@ -167,48 +217,90 @@ def stage(stage_dir, wheels, platforms):
     with open(os.path.join(ROOT, 'blender_manifest.toml')) as fh:
         text = fh.read()
     with open(os.path.join(stage_dir, 'blender_manifest.toml'), 'w') as fh:
-        fh.write(manifest_with(text, wheels, platforms))
+        fh.write(manifest_with(text, wheels, platforms, versions))
 
 
-def build(out_dir, wheels=True, wheel_dir=None, stage_dir=None, log=print):
-    """Build and validate. Returns the list of zip paths."""
+def build(out_dir, wheels=True, wheel_dir=None, stage_dir=None, pythons=None, platforms=None,
+          log=print):
+    """Build and validate the zips of the Python lines ``pythons`` (default: all of PYTHON_LINES) for
+    ``platforms`` (default: all of PLATFORMS). Returns [(zip path, python, platform or None)]."""
     tool, tags = blender_ext_paths()
     wheel_dir = wheel_dir or os.path.join(ROOT, 'wheels')
-    stage_dir = stage_dir or os.path.join(ROOT, 'build', 'extension')
-    shipped = fetch_wheels(wheel_dir, log) if wheels else []
-    platforms = list(PLATFORMS) if wheels else []
-    stage(stage_dir, shipped, platforms)
-    with open(os.path.join(stage_dir, 'blender_manifest.toml'), 'rb') as fh:
-        manifest = tomllib.load(fh)
+    stage_root = stage_dir or os.path.join(ROOT, 'build')
+    pythons = list(pythons or PYTHON_LINES)
+    platforms = list(platforms or PLATFORMS)
+    for py in pythons:
+        if py not in PYTHON_LINES:
+            raise PackageError(f"no Python line {py}: choose from {', '.join(PYTHON_LINES)}")
+    for plat in platforms:
+        if plat not in PLATFORMS:
+            raise PackageError(f"no platform {plat}: choose from {', '.join(PLATFORMS)}")
+    # every wheel first, so a missing one fails before anything is written into out_dir
+    shipped = {py: fetch_wheels(wheel_dir, py, platforms, log) if wheels else {} for py in pythons}
     os.makedirs(out_dir, exist_ok=True)
+    with open(os.path.join(ROOT, 'blender_manifest.toml'), 'rb') as fh:
+        manifest = tomllib.load(fh)
     prefix = f"{manifest['id']}-{manifest['version']}"
     for old in glob.glob(os.path.join(out_dir, prefix + '*.zip')):
         os.remove(old)
-    run([sys.executable, tool, 'validate', '--valid-tags', tags, stage_dir])
-    cmd = [sys.executable, tool, 'build', '--source-dir', stage_dir, '--output-dir', out_dir,
-           '--valid-tags', tags]
-    if wheels:
-        cmd.append('--split-platforms')
-    run(cmd)
-    zips = sorted(glob.glob(os.path.join(out_dir, prefix + '*.zip')))
-    if not zips:
-        raise PackageError(f"blender_ext build wrote no zip into {out_dir}")
-    for z in zips:
-        run([sys.executable, tool, 'validate', '--valid-tags', tags, z])
-        log(f"{os.path.relpath(z)}: {os.path.getsize(z) / 1e6:.1f} MB, validated")
-    return zips
+    built = []
+    for py in pythons:
+        cp = 'cp' + py.replace('.', '')
+        sdir = os.path.join(stage_root, f'extension-{cp}')
+        tmp_out = os.path.join(stage_root, f'zips-{cp}')
+        shutil.rmtree(tmp_out, ignore_errors=True)
+        os.makedirs(tmp_out)
+        wheel_list = sorted({w for ws in shipped[py].values() for w in ws})
+        stage(sdir, wheel_list, platforms if wheels else [], PYTHON_LINES[py][:2])
+        run([sys.executable, tool, 'validate', '--valid-tags', tags, sdir])
+        cmd = [sys.executable, tool, 'build', '--source-dir', sdir, '--output-dir', tmp_out,
+               '--valid-tags', tags]
+        if wheels:
+            cmd.append('--split-platforms')
+        run(cmd)
+        for plat in (platforms if wheels else [None]):
+            suffix = '' if plat is None else '-' + plat.replace('-', '_')
+            src = os.path.join(tmp_out, prefix + suffix + '.zip')
+            if not os.path.exists(src):
+                raise PackageError(f"blender_ext build wrote no {os.path.basename(src)}")
+            dst = os.path.join(out_dir, f'{prefix}-{cp}{suffix}.zip')
+            shutil.move(src, dst)
+            run([sys.executable, tool, 'validate', '--valid-tags', tags, dst])
+            built.append((dst, py, plat))
+        shutil.rmtree(tmp_out, ignore_errors=True)
+    import bpy
+    log(table(built) + f"\nevery zip validated by blender_ext.py of bpy {bpy.app.version_string}")
+    return built
+
+
+def table(built):
+    """Which zip serves which Blender versions."""
+    rows = [('zip', 'platform', 'Python', 'Blender', 'manifest range', 'MB')]
+    for path, py, plat in built:
+        lo, hi, names = PYTHON_LINES[py]
+        rows.append((os.path.basename(path), plat or 'any', py, names, f'>= {lo}, < {hi}',
+                     f'{os.path.getsize(path) / 1e6:.1f}'))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ['  '.join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows]
+    lines.insert(1, '  '.join('-' * w for w in widths))
+    return '\n'.join(lines)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--out', default=os.path.join(ROOT, 'dist'), help="output folder for the zips")
+    ap.add_argument('--python', action='append', choices=list(PYTHON_LINES),
+                    help="a Python line to package (repeatable; default: all)")
+    ap.add_argument('--platform', action='append', choices=list(PLATFORMS),
+                    help="a platform to package (repeatable; default: all)")
     ap.add_argument('--no-wheels', action='store_true',
-                    help="build one zip without third-party wheels (tests, development)")
+                    help="one zip per Python line without third-party wheels (development)")
     ap.add_argument('--wheel-dir', default=None, help="wheel cache (default: wheels/)")
-    ap.add_argument('--stage-dir', default=None, help="staging folder (default: build/extension)")
+    ap.add_argument('--stage-dir', default=None, help="staging folder (default: build/)")
     args = ap.parse_args(argv)
     try:
-        build(args.out, wheels=not args.no_wheels, wheel_dir=args.wheel_dir, stage_dir=args.stage_dir)
+        build(args.out, wheels=not args.no_wheels, wheel_dir=args.wheel_dir, stage_dir=args.stage_dir,
+              pythons=args.python, platforms=args.platform)
     except PackageError as exc:
         print(f"package: {exc}", file=sys.stderr)
         return 1
