@@ -27,7 +27,6 @@ Pipeline of ``cone_unwrap``:
    coordinates are harmonic extensions of that polygon.
 4. measures per triangle (``core.mesh.measures``) and overlap (boundary self-crossings).
 """
-import os
 import time
 from dataclasses import dataclass, field
 
@@ -44,8 +43,8 @@ from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, normalise_
 from .cutgraph import cut_graph, is_disk, reroute_leaf
 from .islands import boundary_crossings, cut_along_seams
 
-KAPPA_MAX = float(os.environ.get("KMAX", 2 * np.pi - 0.3))
-KAPPA_MIN = float(os.environ.get("KMIN", -2 * np.pi + 0.5))
+KAPPA_MAX = 3.5                    # a cone keeps an angle of at least 2*pi - 3.5 (LP bound)
+KAPPA_MIN = -2.0                   # sharper cones spike u and hurt the realised map (LP bound)
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 
 
@@ -316,7 +315,11 @@ def paired_polygon(kt, lt, pair):
     A = np.stack([np.bincount(pair, T[:, 0], minlength=nc), np.bincount(pair, T[:, 1], minlength=nc)])
     r = T.T @ lt                                                # the gap of the unclosed polygon
     M = (A / w) @ A.T
-    lam = np.linalg.lstsq(M, r, rcond=None)[0]
+    # M is singular where the pairs cannot move the end point (no holonomy, e.g. a torus without
+    # cones); there the gap is zero up to round-off anyway
+    ev, Q = np.linalg.eigh(M)
+    inv = np.where(ev > 1e-10 * lt.sum(), 1.0 / np.where(ev > 0, ev, 1.0), 0.0)
+    lam = Q @ (inv * (Q.T @ r))
     s = -(A.T @ lam) / w
     ls = lt + s[pair]
     if (ls <= 0).any():
