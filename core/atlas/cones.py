@@ -37,14 +37,17 @@ from ..errors import ConformalError
 from ..mesh import topology
 from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian
-from ..mesh.measures import measures_from_jacobians
+from ..mesh.measures import jacobians, measures_from_jacobians
 from ..mesh.solve import Factor
 from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, normalise_scale
-from .cutgraph import cut_graph, is_disk, reroute_leaf
+from .cutgraph import cut_graph, is_disk, reroute_leaf, straighten
 from .islands import boundary_crossings, cut_along_seams
 
 KAPPA_MAX = 3.5                    # a cone keeps an angle of at least 2*pi - 3.5 (LP bound)
 KAPPA_MIN = -2.0                   # sharper cones spike u and hurt the realised map (LP bound)
+KAPPA_LEAF = 0.4                   # a cone at a leaf of the cut needs kappa > 0 (one wedge)
+ANGLE_FLOORS = (-2.0, -1.0, 0.1)   # lower bounds of the angle candidates laid out and compared
+BIG_MESH = 20_000                  # above this many vertices: fewer candidates and no cone moves
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 
 
@@ -149,15 +152,17 @@ class ConeSystem:
             mark = mark | (self._adj @ mark.astype(np.int8) > 0)
         return mark
 
-    def linf_angles(self, S, rows=None, kappa0=None, batch=200, max_rounds=30):
+    def linf_angles(self, S, rows=None, kappa0=None, batch=200, max_rounds=30, lower=None):
         """Cone curvatures kappa (k,) minimising ``max u - min u`` over the vertices ``rows`` ((n,)
         bool; default: all but the cones' one-rings), subject to the sum rule (closed) and
-        ``KAPPA_MIN <= kappa <= KAPPA_MAX``. A linear program in k+2 unknowns solved by HiGHS with an
-        active set of rows. Returns (kappa, range) or (None, inf) if infeasible."""
+        ``lower <= kappa <= KAPPA_MAX`` (``lower`` (k,) or None: ``KAPPA_MIN``). A linear program in
+        k+2 unknowns solved by HiGHS with an active set of rows. Returns (kappa, range) or
+        (None, inf) if infeasible."""
         S = np.asarray(S, np.int64)
         k = len(S)
         if self.needs_sum and k * KAPPA_MAX < self.total - 1e-9:
             return None, np.inf
+        lower = np.full(k, KAPPA_MIN) if lower is None else np.asarray(lower, np.float64)
         if rows is None:
             rows = ~self.rings(S, 1)
         idx = np.nonzero(rows)[0]
@@ -165,14 +170,14 @@ class ConeSystem:
         u0 = self.u0[idx]
         if kappa0 is None:
             kappa0 = self.dirichlet_angles(S) if k else np.zeros(0)
-            kappa0 = np.clip(kappa0, KAPPA_MIN, KAPPA_MAX)
+            kappa0 = np.clip(kappa0, lower, KAPPA_MAX)
         u = u0 + G @ kappa0
         order = np.argsort(u)
         active = np.zeros(len(idx), bool)
         active[order[:batch]] = True
         active[order[-batch:]] = True
         c = np.r_[np.zeros(k), -1.0, 1.0]                 # minimise hi - lo
-        bounds = [(KAPPA_MIN, KAPPA_MAX)] * k + [(None, None), (None, None)]
+        bounds = [(float(a), KAPPA_MAX) for a in lower] + [(None, None), (None, None)]
         A_eq = b_eq = None
         if self.needs_sum:
             A_eq = np.r_[np.ones(k), 0.0, 0.0][None]
@@ -198,6 +203,31 @@ class ConeSystem:
             worst = np.argsort(-np.maximum(u - hi, lo - u) * viol)[:batch]
             active[worst[viol[worst]]] = True
         return kappa, span
+
+    def trimmed_angles(self, S, trim=0.01, rounds=3, depth=0, lower=None):
+        """L-inf angles that ignore the tails: ``linf_angles`` re-solved ``rounds`` times, each time
+        without the vertices holding the top and bottom ``trim / 2`` of the area (the per-triangle
+        1%/99% spread is what counts, not the few triangles at the cones), and without the cones'
+        ``depth``-rings (0: the cones only; wider rings let their u spike, which folds the layout next
+        to strong cones on cheburashka). ``lower``: per-cone lower bounds, as in ``linf_angles``.
+        Returns (kappa, spread) with the best ``face_spread`` seen, or (None, 0) if infeasible."""
+        rows = ~self.rings(S, depth)
+        best = (None, 0.0)
+        for _ in range(rounds):
+            kap, _ = self.linf_angles(S, rows, lower=lower)
+            if kap is None:
+                break
+            u = self.u_of(S, kap)
+            sp_ = face_spread(self.F, self.A, u)
+            if sp_ > best[1]:
+                best = (kap, sp_)
+            order = np.argsort(u)
+            c = np.cumsum(self.vertex_area[order]) / self.vertex_area.sum()
+            drop = order[(c < trim / 2) | (c > 1 - trim / 2)]
+            if not rows[drop].any():
+                break
+            rows[drop] = False
+        return best
 
 
 def face_spread(F, A, u, q=1.0):
@@ -279,9 +309,8 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None)
             break
     report(0.9, "solving the cone angles")
     S = np.array(S, np.int64)
-    k_inf, _ = system.linf_angles(S)
+    k_inf, sp_inf = system.trimmed_angles(S)
     if k_inf is not None:
-        sp_inf = face_spread(system.F, system.A, system.u_of(S, k_inf))
         if sp_inf > best:
             kap, best = k_inf, sp_inf
             history.append((len(S), best))
@@ -396,10 +425,12 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16):
         stop[np.asarray(cones, np.int64)] = True
         for lp in topology.boundary_loops(F, n):
             stop[lp] = True
-        new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop)
+        protect = np.zeros(n, bool)
+        protect[np.asarray(cones, np.int64)[np.asarray(kappa) < 0]] = True
+        new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect)
         if new is None:
             break
-        seams = new
+        seams = straighten(F, new, stop)
         added += 1
     a, b = vert_of[loop], vert_of[np.roll(loop, -1)]
     key = np.minimum(a, b) * n + np.maximum(a, b)
@@ -413,6 +444,27 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16):
 # ------------------------------------------------------------------------------------------------
 # the public entry point
 # ------------------------------------------------------------------------------------------------
+def _evaluate(Vw, Fw, system, S, kappa, seams):
+    """Lay out and measure one set of cone angles on the cut ``seams``: dict with cut, loop, uv (N,2)
+    per split vertex (UV area = 3D area), seams, info, measured (``measures_from_jacobians``),
+    crossings (boundary self-crossings) and u (n,)."""
+    u = system.u_of(S, kappa)
+    u -= np.median(u)
+    cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa)
+    Fc = cut.F
+    W = uvc[Fc]
+    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+    a_uv = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
+    if not a_uv > 0:
+        raise ConformalError("the cut disk's layout has no positive UV area: the mesh is numerically "
+                             "degenerate", 'degenerate', 'clean_mesh')
+    uvc = (uvc - uvc.mean(0)) * np.sqrt(system.A.sum() / a_uv)
+    J, A = jacobians(Vw[cut.vert_of], Fc, uvc)
+    measured, _ = measures_from_jacobians(J, A)
+    return {'cut': cut, 'loop': loop, 'uv': uvc, 'seams': seams, 'info': info, 'measured': measured,
+            'crossings': boundary_crossings(uvc, [loop]), 'u': u}
+
+
 def _split_nonmanifold(V, F):
     """Split vertices where separate fans of faces touch (one copy per fan). Returns (F2 (m,3),
     vert_of (N,), count of split vertices)."""
@@ -487,30 +539,47 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     if system.needs_sum and genus == 0 and len(S) < 2:
         raise ConformalError("a closed genus-0 surface needs at least 3 cones (each below 2*pi, summing "
                              "to 4*pi)")
-    u = system.u_of(S, kappa)
-    u -= np.median(u)
     report_progress(0.7, 'cutting')
     t = time.perf_counter()
-    seams = cut_graph(Vw, Fw, S)
+    seams0 = cut_graph(Vw, Fw, S)
     timings['cut'] = time.perf_counter() - t
-    report_progress(0.8, 'laying out the cut disk')
+    report_progress(0.75, 'laying out the cut disk')
     t = time.perf_counter()
-    cut, loop, uvc, seams, linfo = layout_cut(Vw, Fw, u, seams, S, kappa)
+    given = isinstance(cones, tuple) and len(cones) == 2
+    cands = [('placement', kappa)]
+    if not given and len(S):
+        # the cut is fixed by the cones; a leaf of it is one wedge, so its kappa must be positive
+        deg = np.bincount(seams0.ravel(), minlength=n)
+        leaf = deg[S] <= 1
+        for floor in ANGLE_FLOORS[:(None if n <= BIG_MESH else 2)]:
+            lower = np.where(leaf, KAPPA_LEAF, max(floor, KAPPA_MIN))
+            k2, _ = system.trimmed_angles(S, lower=lower)
+            if k2 is not None:
+                cands.append((f'linf, kappa >= {floor}', k2))
+        if n <= BIG_MESH:
+            cands.append(('bff', system.dirichlet_angles(S)))
+    best = None
+    tried = []
+    for label, kap in cands:
+        try:
+            ev = _evaluate(Vw, Fw, system, S, kap, seams0)
+        except ConformalError as exc:
+            tried.append({'angles': label, 'error': exc.problem})
+            continue
+        tried.append({'angles': label, 'flips': ev['measured']['flips'], 'overlaps': ev['crossings'],
+                      'mu_ratio_p1_p99': ev['measured']['mu_ratio_p1_p99']})
+        key = (ev['measured']['flips'] + ev['crossings'] == 0, -ev['measured']['flips'] - ev['crossings'],
+               ev['measured']['mu_ratio_p1_p99'])
+        if best is None or key > best[0]:
+            best = (key, label, kap, ev)
+    if best is None:
+        raise ConformalError(f"no layout of the cut disk could be built: {tried[0]['error']}",
+                             'solve_failed')
+    _, angles_used, kappa, ev = best
+    cut, uvc, seams, linfo = ev['cut'], ev['uv'], ev['seams'], ev['info']
+    measured, crossings, u = ev['measured'], ev['crossings'], ev['u']
     timings['layout'] = time.perf_counter() - t
-    # measures on the cut disk
     t = time.perf_counter()
-    Vc, Fc = Vw[cut.vert_of], cut.F
-    W = uvc[Fc]
-    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
-    a_uv = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
-    if not a_uv > 0:
-        raise ConformalError("the cut disk's layout has no positive UV area: the mesh is numerically "
-                             "degenerate", 'degenerate', 'clean_mesh')
-    uvc = (uvc - uvc.mean(0)) * np.sqrt(system.A.sum() / a_uv)
-    from ..mesh.measures import jacobians
-    J, A = jacobians(Vc, Fc, uvc)
-    measured, _ = measures_from_jacobians(J, A)
-    crossings = boundary_crossings(uvc, [loop])
     E, _ = topology.unique_edges(Fw)
     total_len = float(np.linalg.norm(Vw[E[:, 0]] - Vw[E[:, 1]], axis=1).sum())
     seam_len = float(np.linalg.norm(Vw[seams[:, 0]] - Vw[seams[:, 1]], axis=1).sum()) if len(seams) else 0.0
@@ -534,6 +603,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         'placement': [(int(c), float(s)) for c, s in history],
         'seconds': {k: round(v, 4) for k, v in timings.items()},
     }
+    rep['angles'] = angles_used
+    rep['angle_candidates'] = tried
     if measured['flips']:
         warnings.append(f"{measured['flips']} triangle(s) are flipped in the layout")
     if crossings:
@@ -545,7 +616,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         warnings.append(f"the map is not conformal enough: qc_mean {measured['qc_mean']:.3f}")
     rep['warnings'] = warnings
     # outputs on the input's indices
-    uv = (uvc * unit)[Fc]                                   # (m,3,2) per corner of the input triangles
+    uv = (uvc * unit)[cut.F]                                 # (m,3,2) per corner of the input triangles
     seams_in = np.unique(np.sort(orig[seams], 1), axis=0) if len(seams) else np.zeros((0, 2), np.int64)
     u_in = np.full(n_in, np.nan)
     u_in[orig] = u                                          # (a split vertex: its last copy)

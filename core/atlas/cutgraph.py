@@ -190,7 +190,7 @@ def cut_graph(V, F, cones, root=None):
     keep[cones] = True
     for lp in loops:
         keep[lp] = True
-    cut = prune(np.vstack([H, T]), keep, n)
+    cut = straighten(F, prune(np.vstack([H, T]), keep, n), keep)
     if len(cut) == 0 and not loops:
         # genus 0, closed, at most one cone: slit one edge at the cone so that the surface opens
         v = int(cones[0]) if len(cones) else 0
@@ -231,18 +231,22 @@ def twig(edges, start, stop):
             return path
 
 
-def reroute_leaf(V, F, edges, corner, start, leaves, stop):
+def reroute_leaf(V, F, edges, corner, start, leaves, stop, protect=None):
     """Make the cut graph pass *through* vertex ``corner`` (so that its angle is split in two) by
     moving the twig of one leaf: ``start`` is a vertex next to ``corner``, inside the wedge to split;
     ``leaves`` candidate leaf vertices (positive cones); ``stop`` (n,) bool ends of twigs. The twig of
     the nearest leaf reachable from ``start`` without touching the rest of the cut is removed, and
-    the path leaf - ... - start - corner added, so the cut stays a tree. Returns the new edges (k,2),
-    or None if no leaf is reachable."""
+    the path leaf - ... - start - corner added, so the cut stays a tree. ``protect`` (n,) bool: vertices
+    (negative cones) that must keep two cut edges: a twig ending at one of degree 2 is not moved.
+    Returns the new edges (k,2), or None if no leaf is reachable."""
     n = len(V)
     E, w, _ = edge_list(V, F)
     on_cut = np.zeros(n, bool)
     on_cut[edges.ravel()] = True
     twigs = {int(d): twig(edges, int(d), stop) for d in leaves}
+    deg = np.bincount(edges.ravel(), minlength=n)
+    if protect is not None:
+        twigs = {d: t for d, t in twigs.items() if not (protect[t[-1]] and deg[t[-1]] <= 2)}
     for d in sorted(twigs, key=lambda d: np.linalg.norm(V[d] - V[start])):
         tw = twigs[d]
         free = on_cut.copy()
@@ -264,3 +268,34 @@ def reroute_leaf(V, F, edges, corner, start, leaves, stop):
         new = kept + [(min(a, b), max(a, b)) for a, b in zip(path[:-1], path[1:])]
         return np.unique(np.array(new, np.int64).reshape(-1, 2), axis=0)
     return None
+
+
+def straighten(F, edges, keep):
+    """Remove spikes of the cut: where a path a - v - b turns back along a triangle (a, v, b) at a
+    vertex v of degree 2 that is not in ``keep`` ((n,) bool), the edge a - b replaces it. Such a turn
+    leaves v one wedge of a single corner and the other of nearly 2*pi, which a linearised layout
+    overlaps. The cut stays a tree with the same terminals. Returns edges (k,2)."""
+    F = np.asarray(F, np.int64)
+    tri = set(map(tuple, np.sort(F, axis=1).tolist()))
+    E = {tuple(e) for e in np.sort(np.asarray(edges, np.int64).reshape(-1, 2), 1).tolist()}
+    changed = True
+    while changed:
+        changed = False
+        nbrs = {}
+        for a, b in E:
+            nbrs.setdefault(a, []).append(b)
+            nbrs.setdefault(b, []).append(a)
+        for v, nb in nbrs.items():
+            if len(nb) != 2 or keep[v]:
+                continue
+            a, b = nb
+            ab = (min(a, b), max(a, b))
+            if ab in E or tuple(sorted((a, b, v))) not in tri:
+                continue
+            if (min(a, v), max(a, v)) not in E or (min(b, v), max(b, v)) not in E:
+                continue                                    # v changed in this round already
+            E.discard((min(a, v), max(a, v)))
+            E.discard((min(b, v), max(b, v)))
+            E.add(ab)
+            changed = True
+    return np.array(sorted(E), np.int64).reshape(-1, 2)
