@@ -37,7 +37,7 @@ from ..errors import ConformalError
 from ..mesh import topology
 from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian
-from ..mesh.measures import jacobians, measures_from_jacobians
+from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas
 from ..mesh.solve import Factor
 from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, normalise_scale
 from .cutgraph import cut_graph, is_disk, reroute_leaf, straighten
@@ -48,6 +48,7 @@ KAPPA_MIN = -2.0                   # sharper cones spike u and hurt the realised
 KAPPA_LEAF = 0.4                   # a cone at a leaf of the cut needs kappa > 0 (one wedge)
 ANGLE_FLOORS = (-2.0, -1.0, 0.1)   # lower bounds of the angle candidates laid out and compared
 BIG_MESH = 20_000                  # above this many vertices: fewer candidates and no cone moves
+REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 
 
@@ -359,8 +360,22 @@ def paired_polygon(kt, lt, pair):
     return P
 
 
-def _harmonic(L, loop, PB):
-    """Harmonic extension (N,2) of boundary values ``PB`` (nb,2) on ``loop`` with the cotan ``L``."""
+def clamped_laplacian(L, mark):
+    """``L`` (N,N) with the negative off-diagonal weights (obtuse pairs of angles, needle triangles)
+    of the edges touching ``mark`` ((N,) bool) raised to zero: a local repair of a harmonic map that
+    folds there (positive weights keep the maximum principle). Symmetric; rows still sum to 0."""
+    import scipy.sparse as sp
+    W = (-L).tocoo()
+    off = W.row != W.col
+    touch = mark[W.row] | mark[W.col]
+    w = np.where(off, np.where(touch, np.maximum(W.data, 0.0), W.data), 0.0)
+    Wm = sp.coo_matrix((w, (W.row, W.col)), shape=L.shape).tocsc()
+    return (sp.diags(np.asarray(Wm.sum(axis=1)).ravel()) - Wm).tocsc()
+
+
+def _harmonic(L, loop, PB, cache=None):
+    """Harmonic extension (N,2) of boundary values ``PB`` (nb,2) on ``loop`` with the cotan ``L``.
+    ``cache``: optional dict; the factorisation of ``L_II`` is kept there for the same loop."""
     N = L.shape[0]
     mask = np.zeros(N, bool)
     mask[loop] = True
@@ -369,7 +384,14 @@ def _harmonic(L, loop, PB):
     X[loop] = PB
     if len(I):
         LI = L[I]
-        X[I] = -Factor(LI[:, I]).solve(LI[:, loop] @ PB)
+        key = (N, loop.tobytes())
+        fac = cache.get(key) if cache is not None else None
+        if fac is None:
+            fac = Factor(LI[:, I])
+            if cache is not None:
+                cache.clear()
+                cache[key] = fac
+        X[I] = -fac.solve(LI[:, loop] @ PB)
     return X
 
 
@@ -394,7 +416,7 @@ def _wedge_middle(Vc, Fc, loop, corner):
     return min(inner)[1] if inner else None
 
 
-def layout_cut(V, F, u, seams, cones, kappa, max_branches=16):
+def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None):
     """Cut ``(V, F)`` along ``seams`` (k,2) and lay the disk out with the closed-surface log scale
     ``u`` (n,). A cone whose wedge exceeds ``WEDGE_MAX`` (a negative cone at a leaf of the cut) gets
     the twig of a positive leaf cone rerouted through it (at most ``max_branches`` times).
@@ -436,21 +458,35 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16):
     key = np.minimum(a, b) * n + np.maximum(a, b)
     _, pair = np.unique(key, return_inverse=True)
     P = paired_polygon(kt, lt, pair.ravel())
-    uv = _harmonic(Lc, loop, P)
-    info = {'branches_added': added, 'max_wedge': float(wedge.max()), 'L': Lc, 'pair': pair.ravel()}
+    uv = _harmonic(Lc, loop, P, cache)
+    repaired = 0
+    for _ in range(REPAIR_ROUNDS):
+        area = signed_uv_areas(uv, Fc)
+        bad = area * np.sign(np.median(area)) <= 0
+        if not bad.any():
+            break
+        mark = np.zeros(len(uv), bool)
+        mark[Fc[bad].ravel()] = True
+        adj = topology.vertex_adjacency(Fc, len(uv))
+        for _ in range(2 + repaired):
+            mark |= adj @ mark.astype(np.int8) > 0
+        uv = _harmonic(clamped_laplacian(Lc, mark), loop, P)
+        repaired += 1
+    info = {'repair_rounds': repaired, 'branches_added': added, 'max_wedge': float(wedge.max()),
+            'pair': pair.ravel()}
     return cut, loop, uv, seams, info
 
 
 # ------------------------------------------------------------------------------------------------
 # the public entry point
 # ------------------------------------------------------------------------------------------------
-def _evaluate(Vw, Fw, system, S, kappa, seams):
+def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None):
     """Lay out and measure one set of cone angles on the cut ``seams``: dict with cut, loop, uv (N,2)
     per split vertex (UV area = 3D area), seams, info, measured (``measures_from_jacobians``),
     crossings (boundary self-crossings) and u (n,)."""
     u = system.u_of(S, kappa)
     u -= np.median(u)
-    cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa)
+    cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa, cache=cache)
     Fc = cut.F
     W = uvc[Fc]
     e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
@@ -527,7 +563,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     t = time.perf_counter()
     history = []
     if cones is None:
-        S, kappa, history = place_cones(system, target_ratio, int(max_cones), sweeps,
+        S, kappa, history = place_cones(system, target_ratio, int(max_cones), sweeps if n <= BIG_MESH else 0,
                                         progress=lambda f, msg: report_progress(0.05 + 0.6 * f, msg))
         S, kappa = _drop_weak(system, S, kappa)
     else:
@@ -546,23 +582,32 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     report_progress(0.75, 'laying out the cut disk')
     t = time.perf_counter()
     given = isinstance(cones, tuple) and len(cones) == 2
-    cands = [('placement', kappa)]
-    if not given and len(S):
+    deg = np.bincount(seams0.ravel(), minlength=n)
+
+    def candidates():
+        """Angle sets to lay out: the placement's, L-inf angles with floors, BFF's (lazily)."""
+        if given or not len(S) or n <= BIG_MESH:
+            yield ('given' if given else 'placement'), kappa
+        if given or not len(S):
+            return
         # the cut is fixed by the cones; a leaf of it is one wedge, so its kappa must be positive
-        deg = np.bincount(seams0.ravel(), minlength=n)
         leaf = deg[S] <= 1
-        for floor in ANGLE_FLOORS[:(None if n <= BIG_MESH else 2)]:
-            lower = np.where(leaf, KAPPA_LEAF, max(floor, KAPPA_MIN))
-            k2, _ = system.trimmed_angles(S, lower=lower)
+        for floor in ANGLE_FLOORS:
+            k2, _ = system.trimmed_angles(S, lower=np.where(leaf, KAPPA_LEAF, max(floor, KAPPA_MIN)))
             if k2 is not None:
-                cands.append((f'linf, kappa >= {floor}', k2))
+                yield f'linf, kappa >= {floor}', k2
         if n <= BIG_MESH:
-            cands.append(('bff', system.dirichlet_angles(S)))
+            yield 'bff', system.dirichlet_angles(S)
+
+    cands = candidates()
     best = None
     tried = []
+    cache = {}
     for label, kap in cands:
+        if best is not None and best[0][0] and n > BIG_MESH:
+            break                                   # big mesh: the first valid layout is kept
         try:
-            ev = _evaluate(Vw, Fw, system, S, kap, seams0)
+            ev = _evaluate(Vw, Fw, system, S, kap, seams0, cache)
         except ConformalError as exc:
             tried.append({'angles': label, 'error': exc.problem})
             continue
@@ -596,6 +641,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         'overlaps': int(crossings),
         'seam_edges': int(len(seams)), 'seam_length': seam_len * unit, 'seam_fraction': seam_len / total_len,
         'branches_added': linfo['branches_added'], 'max_wedge': linfo['max_wedge'],
+        'repair_rounds': linfo['repair_rounds'],
         'vertex_ratio': float(np.exp(u.min() - u.max())),
         'vertex_ratio_outside_rings': float(np.exp(u[rows].min() - u[rows].max())),
         'estimated_p1_p99': face_spread(Fw, system.A, u),
