@@ -241,3 +241,23 @@ def test_paired_closure_keeps_pairs_equal():
     l = np.linalg.norm(np.roll(P, -1, 0) - P, axis=1)
     assert abs(l[1] - l[3]) < 1e-12 and abs(l[0] - l[2]) < 1e-12
     assert abs(P[3, 1] - P[0, 1]) < 1e-12 and P[3, 0] < P[0, 0]        # the last edge closes it
+
+
+def test_clamped_laplacian_is_local_and_keeps_the_maximum_principle():
+    from core.atlas.cones import clamped_laplacian
+    from core.mesh.laplacian import cotan_laplacian
+    rng = np.random.default_rng(4)
+    V, F = make_surface('flat', 9)
+    V = V + np.c_[rng.normal(scale=0.12, size=(len(V), 2)), np.zeros(len(V))]    # obtuse triangles
+    L = cotan_laplacian(V, F)
+    assert (L.tocoo().data[L.tocoo().row != L.tocoo().col] > 0).any()           # negative weights
+    mark = np.zeros(len(V), bool)
+    mark[40] = True
+    L2 = clamped_laplacian(L, mark).tocoo()
+    off = L2.row != L2.col
+    touch = mark[L2.row] | mark[L2.col]
+    assert (L2.data[off & touch] <= 0).all()                   # weights near the mark are >= 0
+    D = (L2 - L).tocoo()
+    assert (mark[D.row] | mark[D.col] | (D.row == D.col))[np.abs(D.data) > 0].all()   # nothing else
+    assert np.allclose(np.asarray(L2.tocsr().sum(axis=1)).ravel(), 0, atol=1e-12)
+    assert abs(L2 - L2.T).max() < 1e-15

@@ -37,7 +37,7 @@ from ..errors import ConformalError
 from ..mesh import topology
 from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian
-from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas
+from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, singular_values
 from ..mesh.solve import Factor
 from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, normalise_scale
 from .cutgraph import cut_graph, is_disk, reroute_leaf, straighten
@@ -48,6 +48,7 @@ KAPPA_MIN = -2.0                   # sharper cones spike u and hurt the realised
 KAPPA_LEAF = 0.4                   # a cone at a leaf of the cut needs kappa > 0 (one wedge)
 ANGLE_FLOORS = (-2.0, -1.0, 0.1)   # lower bounds of the angle candidates laid out and compared
 BIG_MESH = 20_000                  # above this many vertices: fewer candidates and no cone moves
+DEGENERATE_QC = 1e3                # a layout triangle with s1/s2 above this counts as degenerate
 REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 
@@ -497,6 +498,9 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None):
     uvc = (uvc - uvc.mean(0)) * np.sqrt(system.A.sum() / a_uv)
     J, A = jacobians(Vw[cut.vert_of], Fc, uvc)
     measured, _ = measures_from_jacobians(J, A)
+    sv = singular_values(J)
+    # a triangle squashed to (nearly) nothing is as unusable as a flipped one
+    measured['degenerate'] = int((sv[:, 1] <= DEGENERATE_QC ** -1 * sv[:, 0]).sum())
     return {'cut': cut, 'loop': loop, 'uv': uvc, 'seams': seams, 'info': info, 'measured': measured,
             'crossings': boundary_crossings(uvc, [loop]), 'u': u}
 
@@ -611,10 +615,12 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         except ConformalError as exc:
             tried.append({'angles': label, 'error': exc.problem})
             continue
-        tried.append({'angles': label, 'flips': ev['measured']['flips'], 'overlaps': ev['crossings'],
-                      'mu_ratio_p1_p99': ev['measured']['mu_ratio_p1_p99']})
-        key = (ev['measured']['flips'] + ev['crossings'] == 0, -ev['measured']['flips'] - ev['crossings'],
-               ev['measured']['mu_ratio_p1_p99'])
+        me = ev['measured']
+        tried.append({'angles': label, 'flips': me['flips'], 'overlaps': ev['crossings'],
+                      'degenerate': me['degenerate'], 'mu_ratio_p1_p99': me['mu_ratio_p1_p99'],
+                      'qc_mean': me['qc_mean']})
+        defects = me['flips'] + ev['crossings'] + me['degenerate']
+        key = (defects == 0, -defects, me['mu_ratio_p1_p99'])
         if best is None or key > best[0]:
             best = (key, label, kap, ev)
     if best is None:
@@ -653,6 +659,9 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     rep['angle_candidates'] = tried
     if measured['flips']:
         warnings.append(f"{measured['flips']} triangle(s) are flipped in the layout")
+    if measured['degenerate']:
+        warnings.append(f"{measured['degenerate']} triangle(s) are squashed nearly flat in the layout "
+                        f"(s1/s2 > {DEGENERATE_QC:g})")
     if crossings:
         warnings.append(f"the layout overlaps itself ({crossings} boundary crossing(s))")
     if target_ratio is not None and cones is None and measured['mu_ratio_p1_p99'] < target_ratio:
