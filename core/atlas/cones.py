@@ -311,7 +311,7 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None)
             break
     report(0.9, "solving the cone angles")
     S = np.array(S, np.int64)
-    k_inf, sp_inf = system.trimmed_angles(S)
+    k_inf, sp_inf = system.trimmed_angles(S, rounds=3 if system.n <= BIG_MESH else 1)
     if k_inf is not None:
         if sp_inf > best:
             kap, best = k_inf, sp_inf
@@ -569,7 +569,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     if cones is None:
         S, kappa, history = place_cones(system, target_ratio, int(max_cones), sweeps if n <= BIG_MESH else 0,
                                         progress=lambda f, msg: report_progress(0.05 + 0.6 * f, msg))
-        S, kappa = _drop_weak(system, S, kappa)
+        if n <= BIG_MESH:
+            S, kappa = _drop_weak(system, S, kappa)
     else:
         S, kappa = _user_cones(system, cones, orig, n_in)
     timings['placement'] = time.perf_counter() - t
@@ -597,7 +598,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         # the cut is fixed by the cones; a leaf of it is one wedge, so its kappa must be positive
         leaf = deg[S] <= 1
         for floor in ANGLE_FLOORS:
-            k2, _ = system.trimmed_angles(S, lower=np.where(leaf, KAPPA_LEAF, max(floor, KAPPA_MIN)))
+            k2, _ = system.trimmed_angles(S, lower=np.where(leaf, KAPPA_LEAF, max(floor, KAPPA_MIN)),
+                                          rounds=3 if n <= BIG_MESH else 1)
             if k2 is not None:
                 yield f'linf, kappa >= {floor}', k2
         if n <= BIG_MESH:

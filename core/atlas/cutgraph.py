@@ -276,8 +276,12 @@ def straighten(F, edges, keep):
     leaves v one wedge of a single corner and the other of nearly 2*pi, which a linearised layout
     overlaps. The cut stays a tree with the same terminals. Returns edges (k,2)."""
     F = np.asarray(F, np.int64)
-    tri = set(map(tuple, np.sort(F, axis=1).tolist()))
-    E = {tuple(e) for e in np.sort(np.asarray(edges, np.int64).reshape(-1, 2), 1).tolist()}
+    edges = np.asarray(edges, np.int64).reshape(-1, 2)
+    on = np.zeros(max(int(F.max()), int(edges.max()) if len(edges) else 0) + 1, bool)
+    on[edges.ravel()] = True
+    near = F[on[F].sum(1) >= 2]                      # only triangles with two cut vertices matter
+    tri = set(map(tuple, np.sort(near, axis=1).tolist()))
+    E = {tuple(e) for e in np.sort(edges, 1).tolist()}
     changed = True
     while changed:
         changed = False
