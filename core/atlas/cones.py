@@ -487,7 +487,8 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None):
     crossings (boundary self-crossings) and u (n,)."""
     u = system.u_of(S, kappa)
     u -= np.median(u)
-    cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa, cache=cache)
+    cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa, cache=cache,
+                                             max_branches=16 if len(Vw) <= BIG_MESH else 4)
     Fc = cut.F
     W = uvc[Fc]
     e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
