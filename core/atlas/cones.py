@@ -12,19 +12,22 @@ columns of the cones are ever computed (one solve each with the one factorisatio
 
 Pipeline of ``cone_unwrap``:
 
-1. placement (``place_cones``): greedy. Each step solves the cone angles on the current set for the
-   L-inf objective (a small linear program: minimise ``max u - min u`` over the vertices outside the
-   cones' one-rings, HiGHS, rows added by an active set), then tries the most extreme vertices of
-   ``u`` as the next cone and keeps the one whose re-solved angles give the best 1%/99% spread of
-   the per-triangle scale. It stops at ``target_ratio`` or ``max_cones``.
+1. placement (``place_cones``): BFF's greedy rule (next cone at the vertex of largest ``|u - u_cone|``
+   with u equal at the cones), until the area-weighted 1%/99% spread of the scale reaches
+   ``target_ratio`` or ``max_cones``; local moves of each cone to its one-ring; L-inf angles (a small
+   linear program: ``max u - min u`` over the vertices outside the cones and the area tails, HiGHS,
+   rows added by an active set).
 2. cut graph (``core.atlas.cutgraph.cut_graph``): 2g homology loops plus a short tree through the
-   cones and the boundary. A cone whose angle would exceed ``2*pi`` in one wedge of the cut disk gets
-   an extra branch that splits that wedge.
-3. layout of the cut disk, BFF-style: the closed-surface ``u`` gives the boundary lengths
+   cones and the boundary, pruned and straightened. A leaf cone must have ``kappa > 0``; a negative
+   cone whose wedge still exceeds ``2*pi`` gets the twig of a positive leaf cone rerouted through it.
+3. layout of the cut disk, BFF-style, for several angle sets on the same cones (the placement's,
+   L-inf angles with floors, BFF's); the best realised p1/p99 without flips, squashed triangles or
+   boundary crossings is kept. The closed-surface ``u`` gives the boundary lengths
    ``exp((u_i+u_j)/2) l_ij`` and turning angles ``k + (L u)_B``; the boundary polygon is closed with
    the smallest weighted length change that is *the same on both copies of every seam edge*, so the
    two sides of a seam stay congruent (a rotation by the cone holonomy and a translation); both UV
-   coordinates are harmonic extensions of that polygon.
+   coordinates are harmonic extensions of that polygon, re-solved with clamped weights where
+   needle triangles make it fold.
 4. measures per triangle (``core.mesh.measures``) and overlap (boundary self-crossings).
 """
 import time
