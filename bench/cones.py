@@ -1,0 +1,197 @@
+"""Cones and seams for the L-inf objective (issue 13): the Pareto table and the anchors.
+
+    .venv/bin/python bench/cones.py [--meshes spot cheburashka cow rocker-arm] [--budgets 4 8 12 16 24]
+                                    [--no-anchor] [--no-xatlas] [--big]
+
+Rows per mesh: ``cone_unwrap`` with exactly N cones (``target_ratio=None, max_cones=N``) and 'auto'
+(``target_ratio=0.5``); the BFF-style greedy anchor (a cone at the vertex of largest |u| with u equal
+at the cones, re-solve, repeat: L2 flavour, no moves, BFF's angles) laid out by the same cut and
+layout; xatlas's charts (if the ``xatlas`` package is installed; benchmarks only). Every row is
+measured per triangle with core.mesh.measures: mu_ratio (min/max), p1/p99, qc_mean, flips; 'cross'
+counts boundary self-crossings of the cut disk (0 with 0 flips: no overlap). 'seam' is the cut's
+length as a fraction of the total edge length. Published MovingCones p1/p99 (vertex level) for
+comparison: spot 16 cones 0.367, 41 cones 0.615; cheburashka 24 cones 0.383, 53 cones 0.604;
+rocker-arm 8 cones 0.420, 18 cones 0.617.
+
+``--big``: the speed target, auto cones plus flattening on ~100k-triangle meshes (spot subdivided
+twice; a blob), with time and peak memory. Meshes are read from ../shared/meshes (relative to the
+repository); the script says so and skips a mesh that is missing. Cow's non-manifold vertex is split
+by ``cone_unwrap`` itself. Timings are noisy (shared machine)."""
+import argparse
+import os
+import resource
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+import numpy as np
+
+from core.atlas.cones import ConeSystem, cone_unwrap
+from core.atlas.islands import cut_along_seams
+from core.io.obj import read_obj
+from core.mesh import topology
+from core.mesh.measures import uv_measures
+from core.mesh.validate import normalise_scale
+from core.surfaces import blob, subdivide
+
+MESHES = os.path.join(ROOT, '..', 'shared', 'meshes')
+MOVING_CONES = {'spot': {16: 0.367, 41: 0.615}, 'cheburashka': {24: 0.383, 53: 0.604},
+                'rocker-arm': {8: 0.420, 18: 0.617}}
+
+
+def load(name):
+    path = os.path.join(MESHES, f'{name}.obj')
+    if not os.path.exists(path):
+        print(f"!! {path} is missing: the public meshes live in ../shared/meshes beside the repository; "
+              f"skipping {name}")
+        return None
+    m = read_obj(path)
+    F, _ = m.triangles()
+    return m.V, F
+
+
+def manifold(V, F):
+    """Split non-manifold vertices (one copy per fan) for the anchors, which work on vertex ids."""
+    n = len(V)
+    if (topology.vertex_fans(F, n) <= 1).all():
+        return V, F
+    cut = cut_along_seams(F, n)
+    return V[cut.vert_of], cut.F
+
+
+def greedy_anchor(V, F, N):
+    """BFF's greedy cones (L2 flavour): cone at the vertex of largest |u - u_cone|, u equal at the
+    cones, re-solve, repeat. Returns (ids, kappa)."""
+    sy = ConeSystem(normalise_scale(V)[0], F)
+    if sy.needs_sum:
+        va = sy.vertex_area / sy.vertex_area.sum()
+        u = sy.solve(sy.total * va - sy.Omega)
+    else:
+        u = sy.u0.copy()
+    S, kap = [], np.zeros(0)
+    for _ in range(N):
+        dev = np.abs(u - (u[S[0]] if S else np.median(u)))
+        dev[~sy.eligible] = -1
+        if S:
+            dev[sy.rings(S, 1)] = -1
+        S.append(int(np.argmax(dev)))
+        kap = sy.dirichlet_angles(S)
+        u = sy.u_of(S, kap)
+    return np.array(S, np.int64), kap
+
+
+def xatlas_row(V, F):
+    import xatlas
+    t = time.perf_counter()
+    vmap, idx, uvs = xatlas.parametrize(V.astype(np.float32), F.astype(np.uint32))
+    dt = time.perf_counter() - t
+    idx = idx.astype(np.int64)
+    uvs = uvs.astype(np.float64)
+    m = uv_measures(V[vmap], idx, uvs)
+    # flips per chart (xatlas may mirror a whole chart, which is not a fold)
+    nchart, chart = topology.face_components(idx, len(vmap))
+    W = uvs[idx]
+    d1, d2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    major = np.sign(np.bincount(chart, np.sign(det), minlength=nchart))
+    m['flips'] = int((np.sign(det) != major[chart]).sum())
+    # seams: boundary edges of the chart mesh, as input edges (both copies give the same key)
+    E, _ = topology.unique_edges(F)
+    total = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).sum()
+    Hs = topology.halfedges(idx)
+    tw = topology.twin_halfedges(idx, len(vmap))
+    He = vmap[Hs[tw < 0]]
+    key = np.unique(np.minimum(He[:, 0], He[:, 1]) * len(V) + np.maximum(He[:, 0], He[:, 1]))
+    seam = np.linalg.norm(V[key // len(V)] - V[key % len(V)], axis=1).sum()
+    return {'cones': f'{nchart} charts', 'seam_fraction': seam / total, **m, 'overlaps': '-', 'time': dt}
+
+
+def fmt(name, label, r, ref=None):
+    cells = [name, label, str(r['cones']), f"{r['seam_fraction']:.4f}", f"{r['mu_ratio']:.3f}",
+             f"{r['mu_ratio_p1_p99']:.3f}", f"{r['qc_mean']:.3f}", str(r['flips']), str(r['overlaps']),
+             f"{r['time']:.1f}", '' if ref is None else f"{ref:.3f}"]
+    return '| ' + ' | '.join(cells) + ' |'
+
+
+def row(res, t):
+    r = dict(res.report)
+    r['time'] = t
+    return r
+
+
+def table(names, budgets, anchor, use_xatlas):
+    print('| mesh | method | cones | seam | mu_ratio | p1/p99 | qc_mean | flips | cross | s '
+          '| MovingCones p1/p99 |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|')
+    for name in names:
+        got = load(name)
+        if got is None:
+            continue
+        V, F = got
+        ref = MOVING_CONES.get(name, {})
+        for N in list(budgets) + ['auto']:
+            t = time.perf_counter()
+            if N == 'auto':
+                res = cone_unwrap(V, F, target_ratio=0.5)
+            else:
+                res = cone_unwrap(V, F, target_ratio=None, max_cones=N)
+            print(fmt(name, 'L-inf cones' + (' (auto, target 0.5)' if N == 'auto' else ''),
+                      row(res, time.perf_counter() - t), ref.get(N)), flush=True)
+        if anchor:
+            Vm, Fm = manifold(V, F)
+            for N in budgets:
+                t = time.perf_counter()
+                ids, kap = greedy_anchor(Vm, Fm, N)
+                res = cone_unwrap(Vm, Fm, cones=(ids, kap))
+                print(fmt(name, 'greedy anchor (BFF, L2)', row(res, time.perf_counter() - t), ref.get(N)),
+                      flush=True)
+        if use_xatlas:
+            try:
+                r = xatlas_row(*manifold(V, F))
+                print(fmt(name, 'xatlas charts', r), flush=True)
+            except ImportError:
+                print(f"| {name} | xatlas | not installed (pip install xatlas; benchmarks only) |")
+
+
+def big():
+    print('| mesh | triangles | cones | p1/p99 | mu_ratio | qc_mean | flips | cross | s (total) '
+          '| s by stage | peak RSS MB |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|')
+    cases = []
+    got = load('spot')
+    if got is not None:
+        V, F = got
+        for _ in range(2):
+            V, F = subdivide(V, F)
+        cases.append(('spot subdivided x2', V, F))
+    cases.append(('blob(71)', *blob(71)))
+    for name, V, F in cases:
+        t = time.perf_counter()
+        res = cone_unwrap(V, F, target_ratio=0.5)
+        dt = time.perf_counter() - t
+        r = res.report
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        stages = ', '.join(f"{k} {v:.1f}" for k, v in r['seconds'].items() if k != 'total')
+        print(f"| {name} | {len(F)} | {r['cones']} | {r['mu_ratio_p1_p99']:.3f} | {r['mu_ratio']:.3f} | "
+              f"{r['qc_mean']:.3f} | {r['flips']} | {r['overlaps']} | {dt:.1f} | {stages} | {peak:.0f} |",
+              flush=True)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--meshes', nargs='+', default=['spot', 'cheburashka', 'cow', 'rocker-arm'])
+    ap.add_argument('--budgets', nargs='+', type=int, default=[4, 8, 12, 16, 24])
+    ap.add_argument('--no-anchor', action='store_true')
+    ap.add_argument('--no-xatlas', action='store_true')
+    ap.add_argument('--big', action='store_true', help='only the 100k-triangle speed rows')
+    a = ap.parse_args()
+    if a.big:
+        big()
+    else:
+        table(a.meshes, a.budgets, not a.no_anchor, not a.no_xatlas)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,725 @@
+"""Cone singularities and seams for the L-inf objective (issue #13; the math is in docs/cones.md).
+
+A cone is a vertex where the flattened map has total angle ``2*pi - kappa_i`` instead of ``2*pi``.
+With target curvature ``kappa`` (nonzero only at cones) the log scale ``u = log mu`` solves
+
+    L u = kappa - Omega            (closed: sum kappa = sum Omega = 2*pi*chi; u up to a constant)
+
+with the cotan Laplacian ``L`` (positive semidefinite) and the angle defect ``Omega``. On a surface
+with boundary the boundary is kept at ``u_B = 0`` (lengths kept) and ``kappa`` is free. ``u`` is affine
+in ``kappa``: ``u = u0 + G[:, S] kappa_S`` with ``G`` the grounded Green's function, of which only the
+columns of the cones are ever computed (one solve each with the one factorisation of ``L``).
+
+Pipeline of ``cone_unwrap``:
+
+1. placement (``place_cones``): BFF's greedy rule (next cone at the vertex of largest ``|u - u_cone|``
+   with u equal at the cones), until the area-weighted 1%/99% spread of the scale reaches
+   ``target_ratio`` or ``max_cones``; local moves of each cone to its one-ring; L-inf angles (a small
+   linear program: ``max u - min u`` over the vertices outside the cones and the area tails, HiGHS,
+   rows added by an active set).
+2. cut graph (``core.atlas.cutgraph.cut_graph``): 2g homology loops plus a short tree through the
+   cones and the boundary, pruned and straightened. A leaf cone must have ``kappa > 0``; a negative
+   cone whose wedge still exceeds ``2*pi`` gets the twig of a positive leaf cone rerouted through it.
+3. layout of the cut disk, BFF-style, for several angle sets on the same cones (the placement's,
+   L-inf angles with floors, BFF's); the best realised p1/p99 without flips, squashed triangles or
+   boundary crossings is kept. The closed-surface ``u`` gives the boundary lengths
+   ``exp((u_i+u_j)/2) l_ij`` and turning angles ``k + (L u)_B``; the boundary polygon is closed with
+   the smallest weighted length change that is *the same on both copies of every seam edge*, so the
+   two sides of a seam stay congruent (a rotation by the cone holonomy and a translation); both UV
+   coordinates are harmonic extensions of that polygon, re-solved with clamped weights where
+   needle triangles make it fold.
+4. measures per triangle (``core.mesh.measures``) and overlap (boundary self-crossings).
+"""
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linprog
+
+from ..errors import ConformalError
+from ..mesh import topology
+from ..mesh.geometry import angle_sums, face_areas
+from ..mesh.laplacian import cotan_laplacian
+from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, singular_values
+from ..mesh.solve import Factor
+from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, normalise_scale
+from .cutgraph import cut_graph, is_disk, reroute_leaf, straighten
+from .islands import boundary_crossings, cut_along_seams
+
+KAPPA_MAX = 3.5                    # a cone keeps an angle of at least 2*pi - 3.5 (LP bound)
+KAPPA_MIN = -2.0                   # sharper cones spike u and hurt the realised map (LP bound)
+KAPPA_LEAF = 0.4                   # a cone at a leaf of the cut needs kappa > 0 (one wedge)
+ANGLE_FLOORS = (-2.0, -1.0, 0.1)   # lower bounds of the angle candidates laid out and compared
+BIG_MESH = 20_000                  # above this many vertices: fewer candidates and no cone moves
+DEGENERATE_QC = 1e3                # a layout triangle with s1/s2 above this counts as degenerate
+REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
+WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
+
+
+@dataclass
+class ConeResult:
+    """``uv`` (m,3,2) float64 UV of every corner of the input triangles (mesh units, UV area = 3D
+    area); ``seams`` (k,2) int64 the cut's edges as vertex pairs of the input; ``cones`` (c,) int64
+    cone vertices of the input; ``kappa`` (c,) float64 their curvature in radians (the flattened
+    angle is ``2*pi - kappa``); ``u`` (n,) float64 log scale per input vertex from the cone solve
+    (NaN on vertices in no face); ``report`` dict of measures, seam length, timings (seconds) and
+    ``warnings`` (list of str, empty when the result meets its targets)."""
+    uv: np.ndarray
+    seams: np.ndarray
+    cones: np.ndarray
+    kappa: np.ndarray
+    u: np.ndarray
+    report: dict = field(default_factory=dict)
+
+
+# ------------------------------------------------------------------------------------------------
+# the cone system: u as an affine function of the cone curvatures
+# ------------------------------------------------------------------------------------------------
+class ConeSystem:
+    """The factorised Yamabe system of one connected manifold mesh ``V`` (n,3), ``F`` (m,3).
+
+    Closed: ``L u = kappa - Omega`` grounded at vertex ``ground`` (u there is 0), valid when ``sum
+    kappa = 2*pi*chi`` (``needs_sum``). With boundary: ``u_B = 0`` on every boundary vertex, ``Omega``
+    is the interior angle defect, ``kappa`` is free. Attributes: ``L``, ``Omega`` (n,), ``A`` (m,)
+    areas, ``chi``, ``u0`` (n,) the solution without cones, ``eligible`` (n,) bool vertices that may
+    become cones (interior vertices)."""
+
+    def __init__(self, V, F, ground=0):
+        self.V, self.F = V, F
+        n = self.n = len(V)
+        self.L = cotan_laplacian(V, F)
+        self.A = face_areas(V, F)
+        loops = topology.boundary_loops(F, n)
+        self.loops = loops
+        self.chi = topology.euler_characteristic(F)
+        bnd = np.zeros(n, bool)
+        for lp in loops:
+            bnd[lp] = True
+        self.boundary = bnd
+        self.Omega = np.where(bnd, 0.0, 2 * np.pi - angle_sums(V, F))
+        self.needs_sum = not loops
+        fixed = bnd.copy() if loops else np.eye(1, n, int(ground), dtype=bool)[0]
+        self.free = np.nonzero(~fixed)[0]
+        self._fac = Factor(self.L[self.free][:, self.free])
+        self.eligible = ~bnd
+        self.total = 2 * np.pi * self.chi if self.needs_sum else None
+        self._cols = {}
+        self.u0 = self.solve(-self.Omega)
+        # per-vertex area (a third of the incident triangles), for area-weighted statistics
+        self.vertex_area = np.bincount(F.ravel(), np.repeat(self.A / 3, 3), minlength=n)
+
+    def solve(self, b):
+        """Grounded solve: x (n,) or (n,r) with ``(L x)_free = b_free`` and x = 0 on the fixed set."""
+        x = np.zeros(np.shape(b))
+        x[self.free] = self._fac.solve(np.asarray(b)[self.free])
+        return x
+
+    def columns(self, S):
+        """(n,k) Green's columns ``G[:, S]`` (the response of u to unit curvature at each cone)."""
+        S = [int(s) for s in S]
+        new = [s for s in S if s not in self._cols]
+        if new:
+            B = np.zeros((self.n, len(new)))
+            B[new, np.arange(len(new))] = 1.0
+            X = self.solve(B)
+            for j, s in enumerate(new):
+                self._cols[s] = X[:, j]
+        if not S:
+            return np.zeros((self.n, 0))
+        return np.stack([self._cols[s] for s in S], axis=1)
+
+    def u_of(self, S, kappa):
+        """Log scale u (n,) with curvature ``kappa`` (k,) at cones ``S`` (k,)."""
+        return self.u0 + self.columns(S) @ np.asarray(kappa, np.float64)
+
+    def dirichlet_angles(self, S):
+        """BFF's cone angles (L2 flavour): ``u`` equal on every cone (0 with a boundary), sum rule on a
+        closed surface. Returns kappa (k,)."""
+        S = np.asarray(S, np.int64)
+        k = len(S)
+        G = self.columns(S)[S]
+        if self.needs_sum:
+            M = np.zeros((k + 1, k + 1))
+            M[:k, :k] = G
+            M[:k, k] = -1.0
+            M[k, :k] = 1.0
+            rhs = np.r_[-self.u0[S], self.total]
+            return np.linalg.lstsq(M, rhs, rcond=None)[0][:k]
+        return np.linalg.lstsq(G, -self.u0[S], rcond=None)[0]
+
+    def rings(self, S, depth=1):
+        """(n,) bool: the vertices within ``depth`` edges of the cones ``S``."""
+        mark = np.zeros(self.n, bool)
+        mark[np.asarray(S, np.int64)] = True
+        if not hasattr(self, '_adj'):
+            self._adj = topology.vertex_adjacency(self.F, self.n).tocsr()
+        for _ in range(depth):
+            mark = mark | (self._adj @ mark.astype(np.int8) > 0)
+        return mark
+
+    def linf_angles(self, S, rows=None, kappa0=None, batch=200, max_rounds=30, lower=None):
+        """Cone curvatures kappa (k,) minimising ``max u - min u`` over the vertices ``rows`` ((n,)
+        bool; default: all but the cones' one-rings), subject to the sum rule (closed) and
+        ``lower <= kappa <= KAPPA_MAX`` (``lower`` (k,) or None: ``KAPPA_MIN``). A linear program in
+        k+2 unknowns solved by HiGHS with an active set of rows. Returns (kappa, range) or
+        (None, inf) if infeasible."""
+        S = np.asarray(S, np.int64)
+        k = len(S)
+        if self.needs_sum and k * KAPPA_MAX < self.total - 1e-9:
+            return None, np.inf
+        lower = np.full(k, KAPPA_MIN) if lower is None else np.asarray(lower, np.float64)
+        if rows is None:
+            rows = ~self.rings(S, 1)
+        idx = np.nonzero(rows)[0]
+        G = self.columns(S)[idx]
+        u0 = self.u0[idx]
+        if kappa0 is None:
+            kappa0 = self.dirichlet_angles(S) if k else np.zeros(0)
+            kappa0 = np.clip(kappa0, lower, KAPPA_MAX)
+        u = u0 + G @ kappa0
+        order = np.argsort(u)
+        active = np.zeros(len(idx), bool)
+        active[order[:batch]] = True
+        active[order[-batch:]] = True
+        c = np.r_[np.zeros(k), -1.0, 1.0]                 # minimise hi - lo
+        bounds = [(float(a), KAPPA_MAX) for a in lower] + [(None, None), (None, None)]
+        A_eq = b_eq = None
+        if self.needs_sum:
+            A_eq = np.r_[np.ones(k), 0.0, 0.0][None]
+            b_eq = [self.total]
+        kappa, span = None, np.inf
+        for _ in range(max_rounds):
+            a = np.nonzero(active)[0]
+            Ga = G[a]
+            A_ub = np.block([[Ga, np.zeros((len(a), 1)), -np.ones((len(a), 1))],
+                             [-Ga, np.ones((len(a), 1)), np.zeros((len(a), 1))]])
+            b_ub = np.r_[-u0[a], u0[a]]
+            res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds, method='highs')
+            if res.status != 0:
+                return None, np.inf
+            kappa, lo, hi = res.x[:k], res.x[k], res.x[k + 1]
+            u = u0 + G @ kappa
+            span = float(u.max() - u.min())
+            tol = 1e-9 * max(1.0, span)
+            viol = (u > hi + tol) | (u < lo - tol)
+            viol &= ~active
+            if not viol.any():
+                break
+            worst = np.argsort(-np.maximum(u - hi, lo - u) * viol)[:batch]
+            active[worst[viol[worst]]] = True
+        return kappa, span
+
+    def trimmed_angles(self, S, trim=0.01, rounds=3, depth=0, lower=None):
+        """L-inf angles that ignore the tails: ``linf_angles`` re-solved ``rounds`` times, each time
+        without the vertices holding the top and bottom ``trim / 2`` of the area (the per-triangle
+        1%/99% spread is what counts, not the few triangles at the cones), and without the cones'
+        ``depth``-rings (0: the cones only; wider rings let their u spike, which folds the layout next
+        to strong cones on cheburashka). ``lower``: per-cone lower bounds, as in ``linf_angles``.
+        Returns (kappa, spread) with the best ``face_spread`` seen, or (None, 0) if infeasible."""
+        rows = ~self.rings(S, depth)
+        best = (None, 0.0)
+        for _ in range(rounds):
+            kap, _ = self.linf_angles(S, rows, lower=lower)
+            if kap is None:
+                break
+            u = self.u_of(S, kap)
+            sp_ = face_spread(self.F, self.A, u)
+            if sp_ > best[1]:
+                best = (kap, sp_)
+            order = np.argsort(u)
+            c = np.cumsum(self.vertex_area[order]) / self.vertex_area.sum()
+            drop = order[(c < trim / 2) | (c > 1 - trim / 2)]
+            if not rows[drop].any():
+                break
+            rows[drop] = False
+        return best
+
+
+def face_spread(F, A, u, q=1.0):
+    """Area-weighted q% / (100-q)% spread of the per-triangle log scale (mean of the corners' u):
+    ``exp(p_q - p_{100-q})``, the vertex-level estimate of the realised ``p1/p99`` (q = 1)."""
+    uf = u[F].mean(1)
+    order = np.argsort(uf)
+    c = np.cumsum(A[order])
+    c /= c[-1]
+    lo = uf[order[np.searchsorted(c, q / 100)]]
+    hi = uf[order[min(np.searchsorted(c, 1 - q / 100), len(c) - 1)]]
+    return float(np.exp(lo - hi))
+
+
+def _score(system, S):
+    """(spread, kappa): the 1%/99% spread of the per-triangle scale with BFF's angles on cones ``S``."""
+    kap = system.dirichlet_angles(S)
+    return face_spread(system.F, system.A, system.u_of(S, kap)), kap
+
+
+def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None):
+    """Cone placement: greedy, then local moves, then L-inf angles (docs/cones.md, "Placement").
+
+    1. Greedy (BFF's rule): the next cone goes to the vertex of largest ``|u - u_cone|`` outside the
+       cones' one-rings, where ``u`` has the cones at one common value (``dirichlet_angles``); one
+       Green's column per cone. It stops when the area-weighted 1%/99% spread of the scale
+       (``face_spread``) reaches ``target_ratio`` (None: never) or at ``max_cones``.
+    2. ``sweeps`` passes of local moves: each cone tries the vertices of its one-ring and moves where
+       the spread improves (with the angles re-solved).
+    3. The angles are re-solved for the L-inf objective (``ConeSystem.linf_angles``); they are kept
+       if they improve the spread.
+    ``system``: ``ConeSystem``. Returns (cones (c,), kappa (c,), history list of (count, spread))."""
+    report = progress or (lambda f, msg: None)
+    S = []
+    if system.needs_sum:
+        va = system.vertex_area / system.vertex_area.sum()
+        u = system.solve(system.total * va - system.Omega)
+    else:
+        u = system.u0.copy()
+    history = [(0, face_spread(system.F, system.A, u))]
+    kap = np.zeros(0)
+    min_cones = 3 if system.needs_sum and system.chi > 0 else 0
+    while len(S) < max_cones:
+        if target_ratio is not None and history[-1][1] >= target_ratio and len(S) >= min_cones:
+            break
+        report(0.7 * len(S) / max(1, max_cones), f"placing cone {len(S) + 1}")
+        ref = u[S[0]] if S else np.median(u[system.eligible]) if system.eligible.any() else 0.0
+        dev = np.abs(u - ref)
+        dev[~system.eligible] = -1
+        if S:
+            dev[system.rings(S, 1)] = -1
+        v = int(np.argmax(dev))
+        if dev[v] < 0:
+            break
+        S.append(v)
+        kap = system.dirichlet_angles(S)
+        u = system.u_of(S, kap)
+        history.append((len(S), face_spread(system.F, system.A, u)))
+    if not S:
+        return np.zeros(0, np.int64), np.zeros(0), history
+    best, kap = _score(system, S)
+    adj = topology.vertex_adjacency(system.F, system.n).tocsr()
+    for sweep in range(sweeps):
+        report(0.7 + 0.2 * sweep / max(1, sweeps), "moving cones")
+        moved = False
+        for i in range(len(S)):
+            others = S[:i] + S[i + 1:]
+            blocked = system.rings(others, 1) if others else np.zeros(system.n, bool)
+            nb = adj[S[i]].indices
+            nb = nb[system.eligible[nb] & ~blocked[nb]]
+            system.columns(nb)
+            for w in nb.tolist():
+                T = S[:i] + [w] + S[i + 1:]
+                sc, kk = _score(system, T)
+                if sc > best + 1e-9:
+                    best, kap, S, moved = sc, kk, T, True
+        history.append((len(S), best))
+        if not moved:
+            break
+    report(0.9, "solving the cone angles")
+    S = np.array(S, np.int64)
+    k_inf, sp_inf = system.trimmed_angles(S, rounds=3 if system.n <= BIG_MESH else 1)
+    if k_inf is not None:
+        if sp_inf > best:
+            kap, best = k_inf, sp_inf
+            history.append((len(S), best))
+    return S, np.asarray(kap, np.float64), history
+
+
+# ------------------------------------------------------------------------------------------------
+# layout of the cut disk
+# ------------------------------------------------------------------------------------------------
+def _boundary_data(Vc, Fc, loop, uc):
+    """Turning angles ``k~`` (nb,) and target lengths ``l~`` (nb,) of the cut disk's boundary ``loop``
+    (edge j from loop[j] to loop[j+1]) for the log scale ``uc`` (N,) on the split vertices."""
+    L = cotan_laplacian(Vc, Fc)
+    s = angle_sums(Vc, Fc)
+    kt = np.pi - s[loop] + (L @ uc)[loop]
+    l = np.linalg.norm(Vc[np.roll(loop, -1)] - Vc[loop], axis=1)
+    lt = np.exp(0.5 * (uc[loop] + uc[np.roll(loop, -1)])) * l
+    return kt, lt, L
+
+
+def paired_polygon(kt, lt, pair):
+    """Closed boundary polygon (nb,2) with turning angles ``kt`` (nb,) (sum 2*pi) and lengths closest
+    to ``lt`` (nb,): the change ``delta = P s`` is shared by the two copies of a seam edge (``pair``
+    (nb,) class of each boundary edge; seam copies share a class) and minimises ``sum delta^2 / lt``
+    subject to closing the polygon (docs/cones.md, "Layout"). Raises ``ConformalError`` if a length
+    would become non-positive."""
+    phi = np.cumsum(kt)
+    T = np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    nc = int(pair.max()) + 1
+    w = np.bincount(pair, 1.0 / lt, minlength=nc)               # W = P^T diag(1/lt) P (diagonal)
+    A = np.stack([np.bincount(pair, T[:, 0], minlength=nc), np.bincount(pair, T[:, 1], minlength=nc)])
+    r = T.T @ lt                                                # the gap of the unclosed polygon
+    M = (A / w) @ A.T
+    # M is singular where the pairs cannot move the end point (no holonomy, e.g. a torus without
+    # cones); there the gap is zero up to round-off anyway
+    ev, Q = np.linalg.eigh(M)
+    inv = np.where(ev > 1e-10 * lt.sum(), 1.0 / np.where(ev > 0, ev, 1.0), 0.0)
+    lam = Q @ (inv * (Q.T @ r))
+    s = -(A.T @ lam) / w
+    ls = lt + s[pair]
+    if (ls <= 0).any():
+        raise ConformalError("the cone scale factors are too extreme to close the cut boundary",
+                             'solve_failed')
+    P = np.zeros((len(ls), 2))
+    P[1:] = np.cumsum(ls[:-1, None] * T[:-1], axis=0)
+    return P
+
+
+def clamped_laplacian(L, mark):
+    """``L`` (N,N) with the negative off-diagonal weights (obtuse pairs of angles, needle triangles)
+    of the edges touching ``mark`` ((N,) bool) raised to zero: a local repair of a harmonic map that
+    folds there (positive weights keep the maximum principle). Symmetric; rows still sum to 0."""
+    import scipy.sparse as sp
+    W = (-L).tocoo()
+    off = W.row != W.col
+    touch = mark[W.row] | mark[W.col]
+    w = np.where(off, np.where(touch, np.maximum(W.data, 0.0), W.data), 0.0)
+    Wm = sp.coo_matrix((w, (W.row, W.col)), shape=L.shape).tocsc()
+    return (sp.diags(np.asarray(Wm.sum(axis=1)).ravel()) - Wm).tocsc()
+
+
+def _harmonic(L, loop, PB, cache=None):
+    """Harmonic extension (N,2) of boundary values ``PB`` (nb,2) on ``loop`` with the cotan ``L``.
+    ``cache``: optional dict; the factorisation of ``L_II`` is kept there for the same loop."""
+    N = L.shape[0]
+    mask = np.zeros(N, bool)
+    mask[loop] = True
+    I = np.nonzero(~mask)[0]
+    X = np.zeros((N, 2))
+    X[loop] = PB
+    if len(I):
+        LI = L[I]
+        key = (N, loop.tobytes())
+        fac = cache.get(key) if cache is not None else None
+        if fac is None:
+            fac = Factor(LI[:, I])
+            if cache is not None:
+                cache.clear()
+                cache[key] = fac
+        X[I] = -fac.solve(LI[:, loop] @ PB)
+    return X
+
+
+def _wedge_middle(Vc, Fc, loop, corner):
+    """The neighbour of boundary vertex ``corner`` of the cut disk that halves its wedge by angle
+    (walking the fan of triangles from the next boundary vertex to the previous one)."""
+    from ..mesh.geometry import corner_angles
+    tris = np.nonzero((Fc == corner).any(1))[0]
+    ang = corner_angles(Vc, Fc[tris])
+    k = np.argmax(Fc[tris] == corner, axis=1)
+    r = np.arange(len(tris))
+    p, q, a = Fc[tris][r, (k + 1) % 3], Fc[tris][r, (k + 2) % 3], ang[r, k]
+    step = {int(x): (int(y), float(z)) for x, y, z in zip(p, q, a)}
+    i = int(np.nonzero(loop == corner)[0][0])
+    v, total, seq = int(loop[(i + 1) % len(loop)]), 0.0, []
+    while v in step:
+        v, da = step[v]
+        total += da
+        seq.append((v, total))
+    half = total / 2
+    inner = [(abs(t - half), v) for v, t in seq[:-1]]
+    return min(inner)[1] if inner else None
+
+
+def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None):
+    """Cut ``(V, F)`` along ``seams`` (k,2) and lay the disk out with the closed-surface log scale
+    ``u`` (n,). A cone whose wedge exceeds ``WEDGE_MAX`` (a negative cone at a leaf of the cut) gets
+    the twig of a positive leaf cone rerouted through it (at most ``max_branches`` times).
+    Returns (cut (``islands.Cut``), loop (nb,), uv (N,2) per split vertex, seams (k',2), info dict)."""
+    n = len(V)
+    seams = np.asarray(seams, np.int64).reshape(-1, 2)
+    added = 0
+    while True:
+        cut = cut_along_seams(F, n, seams)
+        Fc, vert_of = cut.F, cut.vert_of
+        if cut.n_islands != 1 or not is_disk(Fc, len(vert_of)):
+            raise ConformalError("the cut graph does not open the surface into a disk", 'bad_topology')
+        loop = topology.boundary_loops(Fc, len(vert_of))[0]
+        Vc, uc = V[vert_of], u[vert_of]
+        kt, lt, Lc = _boundary_data(Vc, Fc, loop, uc)
+        wedge = np.pi - kt
+        bad = np.nonzero(wedge > WEDGE_MAX)[0]
+        if len(bad) == 0 or added >= max_branches:
+            break
+        cc = int(loop[bad[np.argmax(wedge[bad])]])
+        c = int(vert_of[cc])
+        w0 = _wedge_middle(Vc, Fc, loop, cc)
+        if w0 is None:
+            break
+        deg = np.bincount(seams.ravel(), minlength=n)
+        pos = np.asarray(cones)[(np.asarray(kappa) > 0) & (deg[np.asarray(cones, np.int64)] == 1)]
+        stop = np.zeros(n, bool)
+        stop[np.asarray(cones, np.int64)] = True
+        for lp in topology.boundary_loops(F, n):
+            stop[lp] = True
+        protect = np.zeros(n, bool)
+        protect[np.asarray(cones, np.int64)[np.asarray(kappa) < 0]] = True
+        new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect)
+        if new is None:
+            break
+        seams = straighten(F, new, stop)
+        added += 1
+    a, b = vert_of[loop], vert_of[np.roll(loop, -1)]
+    key = np.minimum(a, b) * n + np.maximum(a, b)
+    _, pair = np.unique(key, return_inverse=True)
+    P = paired_polygon(kt, lt, pair.ravel())
+    uv = _harmonic(Lc, loop, P, cache)
+    repaired = 0
+    for _ in range(REPAIR_ROUNDS):
+        area = signed_uv_areas(uv, Fc)
+        bad = area * np.sign(np.median(area)) <= 0
+        if not bad.any():
+            break
+        mark = np.zeros(len(uv), bool)
+        mark[Fc[bad].ravel()] = True
+        adj = topology.vertex_adjacency(Fc, len(uv))
+        for _ in range(2 + repaired):
+            mark |= adj @ mark.astype(np.int8) > 0
+        uv = _harmonic(clamped_laplacian(Lc, mark), loop, P)
+        repaired += 1
+    info = {'repair_rounds': repaired, 'branches_added': added, 'max_wedge': float(wedge.max()),
+            'pair': pair.ravel()}
+    return cut, loop, uv, seams, info
+
+
+# ------------------------------------------------------------------------------------------------
+# the public entry point
+# ------------------------------------------------------------------------------------------------
+def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None):
+    """Lay out and measure one set of cone angles on the cut ``seams``: dict with cut, loop, uv (N,2)
+    per split vertex (UV area = 3D area), seams, info, measured (``measures_from_jacobians``),
+    crossings (boundary self-crossings) and u (n,)."""
+    u = system.u_of(S, kappa)
+    u -= np.median(u)
+    cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa, cache=cache,
+                                             max_branches=16 if len(Vw) <= BIG_MESH else 4)
+    Fc = cut.F
+    W = uvc[Fc]
+    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+    a_uv = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
+    if not a_uv > 0:
+        raise ConformalError("the cut disk's layout has no positive UV area: the mesh is numerically "
+                             "degenerate", 'degenerate', 'clean_mesh')
+    uvc = (uvc - uvc.mean(0)) * np.sqrt(system.A.sum() / a_uv)
+    J, A = jacobians(Vw[cut.vert_of], Fc, uvc)
+    measured, _ = measures_from_jacobians(J, A)
+    sv = singular_values(J)
+    # a triangle squashed to (nearly) nothing is as unusable as a flipped one
+    measured['degenerate'] = int((sv[:, 1] <= DEGENERATE_QC ** -1 * sv[:, 0]).sum())
+    return {'cut': cut, 'loop': loop, 'uv': uvc, 'seams': seams, 'info': info, 'measured': measured,
+            'crossings': boundary_crossings(uvc, [loop]), 'u': u}
+
+
+def _split_nonmanifold(V, F):
+    """Split vertices where separate fans of faces touch (one copy per fan). Returns (F2 (m,3),
+    vert_of (N,), count of split vertices)."""
+    n = len(V)
+    fans = topology.vertex_fans(F, n)
+    if not (fans > 1).any():
+        return F, np.arange(n), 0
+    cut = cut_along_seams(F, n)
+    return cut.F, cut.vert_of, int((fans > 1).sum())
+
+
+def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
+                max_faces=DEFAULT_MAX_FACES, progress=None):
+    """Conformal UVs with cone singularities and an automatic cut (docs/cones.md).
+
+    V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise; one connected manifold piece,
+    closed (any genus) or with boundary (non-manifold vertices are split internally and reported;
+    the input is never modified). cones: None (automatic placement), (c,) int vertex ids (the angles
+    are solved for the L-inf objective), or a pair ``(ids (c,), kappa (c,))`` with given curvatures in
+    radians (closed: they must sum to 2*pi*chi). target_ratio: stop adding cones when the estimated
+    1%/99% spread of the scale reaches it (None: place exactly ``max_cones``). sweeps: passes of
+    local cone moves after the greedy placement. progress: optional ``progress(fraction, message)``.
+    Returns ``ConeResult``. Raises ``ConformalError`` on bad input."""
+    report_progress = progress or (lambda f, msg: None)
+    t0 = time.perf_counter()
+    timings = {}
+    V, F = as_arrays(V, F)
+    n_in, m = len(V), len(F)
+    if not (target_ratio is None or 0 < target_ratio <= 1):
+        raise ConformalError(f"target_ratio must be in (0, 1] or None, got {target_ratio}")
+    if int(max_cones) < 0:
+        raise ConformalError(f"max_cones must be non-negative, got {max_cones}")
+    warnings = []
+    # a non-manifold vertex is split (one copy per fan); every other problem is an error
+    try:
+        check_mesh(V, F, kind='surface', max_faces=max_faces, allow_loose=True)
+    except ConformalError as exc:
+        if 'non-manifold vertex' not in exc.problem:
+            raise
+    Fs, vert_of0, n_split = _split_nonmanifold(V, F)
+    Vs = V[vert_of0]
+    # drop vertices in no face (allowed: they get no UV and NaN u)
+    check_mesh(Vs, Fs, kind='surface', max_faces=max_faces, allow_loose=True)
+    keep = np.zeros(len(Vs), bool)
+    keep[Fs.ravel()] = True
+    newid = -np.ones(len(Vs), np.int64)
+    newid[keep] = np.arange(keep.sum())
+    Fw = newid[Fs]
+    orig = vert_of0[keep]                     # input vertex of each working vertex
+    Vw, unit = normalise_scale(Vs[keep])
+    n = len(Vw)
+    if n_split:
+        warnings.append(f"{n_split} non-manifold vertex(es) were split (one copy per fan of faces)")
+    timings['check'] = time.perf_counter() - t0
+    report_progress(0.02, 'factorising the Laplacian')
+    t = time.perf_counter()
+    system = ConeSystem(Vw, Fw)
+    timings['factor'] = time.perf_counter() - t
+    genus = (2 - system.chi - len(system.loops)) // 2
+    t = time.perf_counter()
+    history = []
+    if cones is None:
+        S, kappa, history = place_cones(system, target_ratio, int(max_cones), sweeps if n <= BIG_MESH else 0,
+                                        progress=lambda f, msg: report_progress(0.05 + 0.6 * f, msg))
+        if n <= BIG_MESH:
+            S, kappa = _drop_weak(system, S, kappa)
+    else:
+        S, kappa = _user_cones(system, cones, orig, n_in)
+    timings['placement'] = time.perf_counter() - t
+    if system.needs_sum and len(S) and abs(kappa.sum() - system.total) > 1e-6:
+        raise ConformalError(f"the cone curvatures sum to {kappa.sum():.6f}, not 2*pi*chi = "
+                             f"{system.total:.6f} (Gauss-Bonnet)")
+    if system.needs_sum and genus == 0 and len(S) < 2:
+        raise ConformalError("a closed genus-0 surface needs at least 3 cones (each below 2*pi, summing "
+                             "to 4*pi)")
+    report_progress(0.7, 'cutting')
+    t = time.perf_counter()
+    seams0 = cut_graph(Vw, Fw, S)
+    timings['cut'] = time.perf_counter() - t
+    report_progress(0.75, 'laying out the cut disk')
+    t = time.perf_counter()
+    given = isinstance(cones, tuple) and len(cones) == 2
+    deg = np.bincount(seams0.ravel(), minlength=n)
+
+    def candidates():
+        """Angle sets to lay out: the placement's, L-inf angles with floors, BFF's (lazily)."""
+        if given or not len(S) or n <= BIG_MESH:
+            yield ('given' if given else 'placement'), kappa
+        if given or not len(S):
+            return
+        # the cut is fixed by the cones; a leaf of it is one wedge, so its kappa must be positive
+        leaf = deg[S] <= 1
+        for floor in ANGLE_FLOORS:
+            k2, _ = system.trimmed_angles(S, lower=np.where(leaf, KAPPA_LEAF, max(floor, KAPPA_MIN)),
+                                          rounds=3 if n <= BIG_MESH else 1)
+            if k2 is not None:
+                yield f'linf, kappa >= {floor}', k2
+        if n <= BIG_MESH:
+            yield 'bff', system.dirichlet_angles(S)
+
+    cands = candidates()
+    best = None
+    tried = []
+    cache = {}
+    for label, kap in cands:
+        if best is not None and best[0][0] and n > BIG_MESH:
+            break                                   # big mesh: the first valid layout is kept
+        try:
+            ev = _evaluate(Vw, Fw, system, S, kap, seams0, cache)
+        except ConformalError as exc:
+            tried.append({'angles': label, 'error': exc.problem})
+            continue
+        me = ev['measured']
+        tried.append({'angles': label, 'flips': me['flips'], 'overlaps': ev['crossings'],
+                      'degenerate': me['degenerate'], 'mu_ratio_p1_p99': me['mu_ratio_p1_p99'],
+                      'qc_mean': me['qc_mean']})
+        defects = me['flips'] + ev['crossings'] + me['degenerate']
+        key = (defects == 0, -defects, me['mu_ratio_p1_p99'])
+        if best is None or key > best[0]:
+            best = (key, label, kap, ev)
+    if best is None:
+        raise ConformalError(f"no layout of the cut disk could be built: {tried[0]['error']}",
+                             'solve_failed')
+    _, angles_used, kappa, ev = best
+    cut, uvc, seams, linfo = ev['cut'], ev['uv'], ev['seams'], ev['info']
+    measured, crossings, u = ev['measured'], ev['crossings'], ev['u']
+    timings['layout'] = time.perf_counter() - t
+    t = time.perf_counter()
+    E, _ = topology.unique_edges(Fw)
+    total_len = float(np.linalg.norm(Vw[E[:, 0]] - Vw[E[:, 1]], axis=1).sum())
+    seam_len = float(np.linalg.norm(Vw[seams[:, 0]] - Vw[seams[:, 1]], axis=1).sum()) if len(seams) else 0.0
+    rows = ~system.rings(S, 1) if len(S) else np.ones(n, bool)
+    timings['measure'] = time.perf_counter() - t
+    timings['total'] = time.perf_counter() - t0
+    rep = {
+        'vertices': n_in, 'faces': m, 'genus': int(genus), 'boundary_loops': len(system.loops),
+        'euler': int(system.chi), 'split_vertices': n_split,
+        'cones': int(len(S)), 'kappa_sum': float(kappa.sum()) if len(S) else 0.0,
+        'kappa_min': float(kappa.min()) if len(S) else 0.0,
+        'kappa_max': float(kappa.max()) if len(S) else 0.0,
+        **measured,
+        'overlaps': int(crossings),
+        'seam_edges': int(len(seams)), 'seam_length': seam_len * unit, 'seam_fraction': seam_len / total_len,
+        'branches_added': linfo['branches_added'], 'max_wedge': linfo['max_wedge'],
+        'repair_rounds': linfo['repair_rounds'],
+        'vertex_ratio': float(np.exp(u.min() - u.max())),
+        'vertex_ratio_outside_rings': float(np.exp(u[rows].min() - u[rows].max())),
+        'estimated_p1_p99': face_spread(Fw, system.A, u),
+        'target_ratio': target_ratio,
+        'placement': [(int(c), float(s)) for c, s in history],
+        'seconds': {k: round(v, 4) for k, v in timings.items()},
+    }
+    rep['angles'] = angles_used
+    rep['angle_candidates'] = tried
+    if measured['flips']:
+        warnings.append(f"{measured['flips']} triangle(s) are flipped in the layout")
+    if measured['degenerate']:
+        warnings.append(f"{measured['degenerate']} triangle(s) are squashed nearly flat in the layout "
+                        f"(s1/s2 > {DEGENERATE_QC:g})")
+    if crossings:
+        warnings.append(f"the layout overlaps itself ({crossings} boundary crossing(s))")
+    if target_ratio is not None and cones is None and measured['mu_ratio_p1_p99'] < target_ratio:
+        warnings.append(f"the 1%/99% scale ratio {measured['mu_ratio_p1_p99']:.3f} is below the target "
+                        f"{target_ratio} with {len(S)} cones (max_cones={max_cones})")
+    if measured['qc_mean'] > 1.05:
+        warnings.append(f"the map is not conformal enough: qc_mean {measured['qc_mean']:.3f}")
+    rep['warnings'] = warnings
+    # outputs on the input's indices
+    uv = (uvc * unit)[cut.F]                                 # (m,3,2) per corner of the input triangles
+    seams_in = np.unique(np.sort(orig[seams], 1), axis=0) if len(seams) else np.zeros((0, 2), np.int64)
+    u_in = np.full(n_in, np.nan)
+    u_in[orig] = u                                          # (a split vertex: its last copy)
+    report_progress(1.0, 'done')
+    return ConeResult(uv=uv, seams=seams_in, cones=orig[S], kappa=kappa, u=u_in, report=rep)
+
+
+def _drop_weak(system, S, kappa, tol=0.02):
+    """Remove cones with |kappa| < tol and re-solve the angles of the rest."""
+    weak = np.abs(kappa) < tol
+    if not weak.any() or len(S) == 0:
+        return S, kappa
+    S2 = S[~weak]
+    k2, _ = system.linf_angles(S2)
+    if k2 is None:
+        return S, kappa
+    return S2, k2
+
+
+def _user_cones(system, cones, orig, n_in):
+    """Working-vertex cone ids and curvatures from the user's ``cones``: (c,) ids or (ids, kappa)."""
+    if isinstance(cones, tuple) and len(cones) == 2:
+        ids, kap = np.asarray(cones[0]), np.asarray(cones[1], np.float64)
+    else:
+        ids, kap = np.asarray(cones), None
+    if ids.ndim != 1 or (len(ids) and (not np.issubdtype(ids.dtype, np.integer) or ids.min() < 0
+                                       or ids.max() >= n_in)):
+        raise ConformalError(f"cones must be vertex indices in 0..{n_in - 1}")
+    if len(np.unique(ids)) != len(ids):
+        raise ConformalError("cones name the same vertex twice")
+    work = -np.ones(n_in, np.int64)
+    work[orig] = np.arange(len(orig))
+    S = work[ids]
+    if (S < 0).any():
+        raise ConformalError("a cone is a vertex in no face")
+    if not system.eligible[S].all():
+        raise ConformalError("a cone lies on the boundary: cones must be interior vertices")
+    if kap is None:
+        kap, _ = system.linf_angles(S)
+        if kap is None:
+            raise ConformalError(f"no cone angles on these {len(S)} vertices satisfy Gauss-Bonnet with every "
+                                 "angle positive: add cones")
+    elif kap.shape != S.shape or not np.isfinite(kap).all():
+        raise ConformalError("cone curvatures must be one finite number per cone")
+    return S.astype(np.int64), kap

@@ -1,0 +1,263 @@
+"""Cones and seams for the L-inf objective (core.atlas.cones, core.atlas.cutgraph; docs/cones.md)."""
+import numpy as np
+import pytest
+
+from core.atlas.cones import ConeSystem, cone_unwrap, paired_polygon
+from core.atlas.cutgraph import cut_graph, is_disk
+from core.atlas.islands import cut_along_seams
+from core.errors import ConformalError
+from core.mesh import topology
+from core.surfaces import blob, make_surface
+
+
+def rounded_cube(k=6, t=0.3):
+    """A cube of k x k squares per face (two triangles each), moved a fraction ``t`` of the way to
+    the sphere. Its 8 corners are the optimal cones (pi/2 each, exactly so for t = 0)."""
+    P, Fs = [], []
+    g = np.linspace(-1, 1, k + 1)
+    A, B = np.meshgrid(g, g, indexing='ij')
+    for axis in range(3):
+        for sgn in (-1, 1):
+            pts = np.zeros(((k + 1) ** 2, 3))
+            o = [i for i in range(3) if i != axis]
+            pts[:, axis], pts[:, o[0]], pts[:, o[1]] = sgn, A.ravel(), B.ravel()
+            base = sum(len(p) for p in P)
+            i, j = np.meshgrid(np.arange(k), np.arange(k), indexing='ij')
+            a = (i * (k + 1) + j).ravel() + base
+            b, c, d = a + (k + 1), a + k + 2, a + 1
+            P.append(pts)
+            Fs.append(np.r_[np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    P, F = np.vstack(P), np.vstack(Fs)
+    _, first, inv = np.unique(np.round(P, 9), axis=0, return_index=True, return_inverse=True)
+    V, F = P[first], inv.ravel()[F]
+    nrm = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    out = (nrm * V[F].mean(1)).sum(1) < 0
+    F[out] = F[out][:, ::-1]
+    S = V / np.linalg.norm(V, axis=1)[:, None]
+    corners = np.nonzero((np.abs(V) == 1).all(1))[0]
+    return (1 - t) * V + t * S, F, corners
+
+
+def torus(nu=24, nv=12, R=1.0, r=0.4):
+    """Torus of revolution (genus 1), counter-clockwise seen from outside."""
+    a, b = np.meshgrid(np.arange(nu), np.arange(nv), indexing='ij')
+    th, ph = 2 * np.pi * a.ravel() / nu, 2 * np.pi * b.ravel() / nv
+    V = np.stack([(R + r * np.cos(ph)) * np.cos(th), (R + r * np.cos(ph)) * np.sin(th), r * np.sin(ph)], 1)
+    idx = lambda i, j: (i % nu) * nv + (j % nv)
+    i, j = a.ravel(), b.ravel()
+    F = np.r_[np.stack([idx(i, j), idx(i + 1, j), idx(i + 1, j + 1)], 1),
+              np.stack([idx(i, j), idx(i + 1, j + 1), idx(i, j + 1)], 1)]
+    return V, F.astype(np.int64)
+
+
+def seam_motions(F, uv, seams):
+    """For every seam edge (a,b): the rotation angle and translation (theta, tx, ty) that take its
+    copy in one triangle to its copy in the other, and the two copies' lengths."""
+    H = topology.halfedges(F)
+    key = {tuple(h): i for i, h in enumerate(H.tolist())}
+    out = []
+    for a, b in seams.tolist():
+        h1, h2 = key[(a, b)], key[(b, a)]
+        t1, k1, t2, k2 = h1 // 3, h1 % 3, h2 // 3, h2 % 3
+        pa1, pb1 = uv[t1, k1], uv[t1, (k1 + 1) % 3]
+        pb2, pa2 = uv[t2, k2], uv[t2, (k2 + 1) % 3]
+        d1, d2 = pb1 - pa1, pb2 - pa2
+        th = np.arctan2(d2[1], d2[0]) - np.arctan2(d1[1], d1[0])
+        R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+        t = pa2 - R @ pa1
+        out.append((th, t[0], t[1], np.linalg.norm(d1), np.linalg.norm(d2)))
+    return np.array(out)
+
+
+def check_rigid_seams(res, F, tol=1e-9):
+    """Both copies of every seam edge are congruent, and one rigid motion holds along each seam
+    segment between cones and branch points."""
+    seams = res.seams
+    M = seam_motions(F, res.uv, seams)
+    scale = np.abs(res.uv).max()
+    assert np.allclose(M[:, 3], M[:, 4], rtol=0, atol=tol * scale)
+    n = int(F.max()) + 1
+    deg = np.bincount(seams.ravel(), minlength=n)
+    regular = (deg == 2)
+    regular[res.cones] = False
+    checked = 0
+    for v in np.nonzero(regular)[0]:
+        e = seams[(seams == v).any(1)]
+        x, y = (e[0, 0] if e[0, 1] == v else e[0, 1]), (e[1, 0] if e[1, 1] == v else e[1, 1])
+        M2 = seam_motions(F, res.uv, np.array([[x, v], [v, y]]))      # oriented along the seam
+        th = np.angle(np.exp(1j * (M2[0, 0] - M2[1, 0])))
+        assert abs(th) < tol
+        assert np.allclose(M2[0, 1:3], M2[1, 1:3], rtol=0, atol=tol * scale)
+        checked += 1
+    return checked
+
+
+def test_cube_finds_its_eight_corners_exactly():
+    V, F, corners = rounded_cube(6, 0.0)
+    res = cone_unwrap(V, F, target_ratio=0.99)
+    assert sorted(res.cones.tolist()) == sorted(corners.tolist())
+    assert np.allclose(res.kappa, np.pi / 2, atol=1e-9)
+    rep = res.report
+    assert rep['flips'] == 0 and rep['overlaps'] == 0
+    assert rep['mu_ratio'] > 1 - 1e-9 and rep['qc_max'] < 1 + 1e-9      # the cube's net: isometric
+    assert rep['warnings'] == []
+
+
+def test_rounded_cube_gauss_bonnet_and_quality():
+    V, F, corners = rounded_cube(8, 0.3)
+    res = cone_unwrap(V, F, target_ratio=0.8)
+    rep = res.report
+    assert sorted(res.cones.tolist()) == sorted(corners.tolist())
+    assert abs(res.kappa.sum() - 4 * np.pi) < 1e-9                        # Gauss-Bonnet, chi = 2
+    assert rep['flips'] == 0 and rep['overlaps'] == 0
+    assert rep['mu_ratio_p1_p99'] > 0.8 and rep['qc_mean'] < 1.03
+    # far more uniform than one cut with few cones
+    few = cone_unwrap(V, F, max_cones=3, target_ratio=None)
+    assert few.report['mu_ratio_p1_p99'] < rep['mu_ratio_p1_p99'] - 0.2
+    assert abs(few.kappa.sum() - 4 * np.pi) < 1e-9
+
+
+def test_seam_copies_agree_up_to_rotation_and_translation():
+    V, F = blob(10)
+    res = cone_unwrap(V, F, max_cones=10, target_ratio=None)
+    assert res.report['cones'] >= 8
+    assert res.report['flips'] == 0 and res.report['overlaps'] == 0
+    assert check_rigid_seams(res, F) > 20
+    # the rotation across a seam leaving a single leaf cone is its cone angle (holonomy)
+    deg = np.bincount(res.seams.ravel(), minlength=len(V))
+    leaf = [i for i, c in enumerate(res.cones) if deg[c] == 1]
+    assert leaf
+    M = seam_motions(F, res.uv, res.seams)
+    for i in leaf:
+        e = int(np.nonzero((res.seams == res.cones[i]).any(1))[0][0])
+        th = M[e, 0]
+        assert abs(np.angle(np.exp(1j * (abs(th) - res.kappa[i])))) < 1e-6 or \
+            abs(np.angle(np.exp(1j * (abs(th) + res.kappa[i] - 2 * np.pi)))) < 1e-6
+
+
+def test_torus_cut_and_layout():
+    V, F = torus()
+    g = cut_graph(V, F, [])
+    cut = cut_along_seams(F, len(V), g)
+    assert is_disk(cut.F, len(cut.vert_of))                  # two loops open the handle
+    res = cone_unwrap(V, F, max_cones=6, target_ratio=None)
+    rep = res.report
+    assert rep['genus'] == 1 and abs(res.kappa.sum()) < 1e-9  # chi = 0
+    assert rep['flips'] == 0 and rep['overlaps'] == 0
+    check_rigid_seams(res, F)
+    none = cone_unwrap(V, F, cones=np.zeros(0, np.int64))
+    assert none.report['cones'] == 0 and none.report['flips'] == 0
+    assert rep['mu_ratio_p1_p99'] > none.report['mu_ratio_p1_p99'] + 0.03
+
+
+def test_rigid_motion_scale_and_vertex_order_invariance():
+    V, F, _ = rounded_cube(6, 0.25)
+    V = V + 0.01 * np.sin(7 * V[:, [1, 2, 0]])                  # break the symmetry
+    a = cone_unwrap(V, F, max_cones=8, target_ratio=None)
+    Q, _ = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))
+    Q *= np.sign(np.linalg.det(Q))                              # a rotation
+    b = cone_unwrap(1e3 * V @ Q.T + 5.0, F, max_cones=8, target_ratio=None)
+    assert np.array_equal(a.cones, b.cones)
+    assert np.allclose(a.kappa, b.kappa, atol=1e-9)
+    # the grid-like cube has equally short cut paths: round-off may pick another one of them
+    for key in ('mu_ratio', 'mu_ratio_p1_p99', 'qc_mean', 'seam_fraction'):
+        assert abs(a.report[key] - b.report[key]) < 2e-3, key
+    assert abs(b.report['seam_length'] / a.report['seam_length'] / 1e3 - 1) < 0.05
+    # vertex and face order: the same cones; ties between equally short cut paths may differ
+    perm = np.random.default_rng(2).permutation(len(V))
+    inv = np.argsort(perm)
+    forder = np.random.default_rng(3).permutation(len(F))
+    c = cone_unwrap(V[perm], inv[F][forder], max_cones=8, target_ratio=None)
+    assert sorted(perm[c.cones].tolist()) == sorted(a.cones.tolist())
+    assert np.allclose(np.sort(c.kappa), np.sort(a.kappa), atol=1e-9)
+    for key in ('mu_ratio', 'mu_ratio_p1_p99', 'qc_mean'):
+        assert abs(a.report[key] - c.report[key]) < 2e-3, key
+    assert c.report['flips'] == 0 and c.report['overlaps'] == 0
+
+
+def test_disk_with_boundary():
+    V, F = make_surface('bump3', 17)
+    res = cone_unwrap(V, F, max_cones=4, target_ratio=None)
+    rep = res.report
+    assert rep['boundary_loops'] == 1 and rep['flips'] == 0 and rep['overlaps'] == 0
+    plain = cone_unwrap(V, F, cones=np.zeros(0, np.int64))
+    assert plain.report['seam_edges'] == 0                    # a disk needs no cut
+    assert rep['mu_ratio_p1_p99'] > plain.report['mu_ratio_p1_p99']
+    check_rigid_seams(res, F)
+
+
+def test_input_never_modified_and_pieces_rejected():
+    V, F, _ = rounded_cube(4, 0.2)
+    # a second cube touching the first at one vertex: one non-manifold vertex, one piece
+    V2, F2 = V.copy() + [2.0, 0, 0], F.copy()
+    touch_a = int(np.argmax(V[:, 0] + 1e-3 * V[:, 1] + 1e-6 * V[:, 2]))
+    touch_b = int(np.argmin(V2[:, 0] - 1e-3 * V2[:, 1] - 1e-6 * V2[:, 2]))
+    V2 = V2 - V2[touch_b] + V[touch_a]
+    F2 = F2 + len(V)
+    Vall = np.vstack([V, V2])
+    Fall = np.where(np.vstack([F, F2]) == touch_b + len(V), touch_a, np.vstack([F, F2]))
+    keep = np.ones(len(Vall), bool)
+    keep[touch_b + len(V)] = False
+    Fall = np.cumsum(keep)[Fall] - 1
+    Vall = Vall[keep]
+    V0, F0 = Vall.copy(), Fall.copy()
+    with pytest.raises(ConformalError):          # after the split it is two pieces
+        cone_unwrap(Vall, Fall)
+    assert np.array_equal(V0, Vall) and np.array_equal(F0, Fall)
+
+
+def test_user_cones_and_errors():
+    V, F, corners = rounded_cube(4, 0.0)
+    res = cone_unwrap(V, F, cones=(corners, np.full(8, np.pi / 2)))
+    assert res.report['mu_ratio'] > 1 - 1e-9
+    with pytest.raises(ConformalError, match='Gauss-Bonnet'):
+        cone_unwrap(V, F, cones=(corners, np.full(8, 1.0)))
+    with pytest.raises(ConformalError):
+        cone_unwrap(V, F, cones=np.array([len(V) + 3]))
+    with pytest.raises(ConformalError):
+        cone_unwrap(V, F, target_ratio=2.0)
+
+
+def test_green_columns_solve_the_cone_equation():
+    V, F = blob(6)
+    sy = ConeSystem(V, F)
+    S = np.array([3, 50, 200])
+    kap = sy.dirichlet_angles(S)
+    assert abs(kap.sum() - 4 * np.pi) < 1e-9
+    u = sy.u_of(S, kap)
+    rhs = -sy.Omega.copy()
+    rhs[S] += kap
+    assert np.allclose(sy.L @ u, rhs, atol=1e-9)
+    assert np.ptp(u[S]) < 1e-9                                 # BFF's rule: u equal at the cones
+
+
+def test_paired_closure_keeps_pairs_equal():
+    rng = np.random.default_rng(0)
+    # a square with one slit pair: edges 1 and 3 are copies of one edge
+    kt = np.array([np.pi / 2] * 4)
+    lt = np.array([1.0, 1.3, 1.0, 1.3]) + rng.normal(scale=0.05, size=4)
+    pair = np.array([0, 1, 2, 1])
+    P = paired_polygon(kt, lt, pair)
+    l = np.linalg.norm(np.roll(P, -1, 0) - P, axis=1)
+    assert abs(l[1] - l[3]) < 1e-12 and abs(l[0] - l[2]) < 1e-12
+    assert abs(P[3, 1] - P[0, 1]) < 1e-12 and P[3, 0] < P[0, 0]        # the last edge closes it
+
+
+def test_clamped_laplacian_is_local_and_keeps_the_maximum_principle():
+    from core.atlas.cones import clamped_laplacian
+    from core.mesh.laplacian import cotan_laplacian
+    rng = np.random.default_rng(4)
+    V, F = make_surface('flat', 9)
+    V = V + np.c_[rng.normal(scale=0.12, size=(len(V), 2)), np.zeros(len(V))]    # obtuse triangles
+    L = cotan_laplacian(V, F)
+    assert (L.tocoo().data[L.tocoo().row != L.tocoo().col] > 0).any()           # negative weights
+    mark = np.zeros(len(V), bool)
+    mark[40] = True
+    L2 = clamped_laplacian(L, mark).tocoo()
+    off = L2.row != L2.col
+    touch = mark[L2.row] | mark[L2.col]
+    assert (L2.data[off & touch] <= 0).all()                   # weights near the mark are >= 0
+    D = (L2 - L).tocoo()
+    assert (mark[D.row] | mark[D.col] | (D.row == D.col))[np.abs(D.data) > 0].all()   # nothing else
+    assert np.allclose(np.asarray(L2.tocsr().sum(axis=1)).ravel(), 0, atol=1e-12)
+    assert abs(L2 - L2.T).max() < 1e-15
