@@ -235,3 +235,25 @@ def test_version_and_cli_json_warnings(tmp_path, capsys):
 def _manifest():
     import os
     return os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'blender_manifest.toml')
+
+
+def test_unwrap_with_cones_opens_a_closed_mesh():
+    """cones='auto' unwraps a closed genus-0 mesh in one call: automatic seams, cones that satisfy
+    Gauss-Bonnet, per-corner UVs everywhere, zero flips, and the seams reported as input edges."""
+    from core.surfaces import blob
+    from core.mesh import topology
+    V, F = blob(6, bumps=((0, 0, 1, 0.8), (1, 0, 0, 0.5)), width=0.2)
+    res = unwrap(V, F, cones='auto')
+    assert res.report['path'] == 'cones'
+    assert np.isfinite(res.uv_corner).all() and res.flattened.all()
+    assert res.report['flips'] == 0 and res.report['overlaps'] == 0
+    kappa = np.array([k for _, k in res.cones])
+    assert len(kappa) >= 3 and kappa.sum() == pytest.approx(4 * np.pi, abs=1e-6)   # chi = 2
+    E, _ = topology.unique_edges(F)
+    keys = set(map(tuple, E.tolist()))
+    assert len(res.seams) and all(tuple(sorted(e)) in keys for e in res.seams.tolist())
+    assert res.uv_corner.min() >= -1e-12 and res.uv_corner.max() <= 1 + 1e-12
+    # a seam edge's two sides get different UVs, an inner edge's the same
+    assert res.uv.shape[0] > len(V)
+    with pytest.raises(ConformalError):
+        unwrap(V, F, cones='many')

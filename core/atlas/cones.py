@@ -53,6 +53,8 @@ ANGLE_FLOORS = (-2.0, -1.0, 0.1)   # lower bounds of the angle candidates laid o
 BIG_MESH = 20_000                  # above this many vertices: fewer candidates and no cone moves
 DEGENERATE_QC = 1e3                # a layout triangle with s1/s2 above this counts as degenerate
 REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
+QC_WARN = 1.1                      # the layout's qc_mean above this is reported (both UV coordinates
+                                   # are harmonic, so the cut disk is not exactly conformal)
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 
 
@@ -673,7 +675,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     if target_ratio is not None and cones is None and measured['mu_ratio_p1_p99'] < target_ratio:
         warnings.append(f"the 1%/99% scale ratio {measured['mu_ratio_p1_p99']:.3f} is below the target "
                         f"{target_ratio} with {len(S)} cones (max_cones={max_cones})")
-    if measured['qc_mean'] > 1.05:
+    if measured['qc_mean'] > QC_WARN:
         warnings.append(f"the map is not conformal enough: qc_mean {measured['qc_mean']:.3f}")
     rep['warnings'] = warnings
     # outputs on the input's indices

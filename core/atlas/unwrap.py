@@ -12,6 +12,9 @@ What it does:
    requested fit (no packing: there is nothing to pack). Everything else (seams, several pieces,
    holes, closed parts, messy input) goes through the island pipeline
    ``core.atlas.islands.unwrap``, which repairs what it can and says what is wrong otherwise.
+   With ``cones`` set, every connected part gets automatic seams instead: cone singularities placed
+   for the L-inf objective and a cut through them (``core.atlas.cones.cone_unwrap``), one island per
+   part, packed like the others. This is how closed meshes of any genus unwrap in one call.
 3. Measures: the final layout is measured on the flattened triangles only (docs/math.md section 3):
    flips, mu ratio, qc; the per-triangle conformal factor ``mu`` and the per-vertex one
    (``core.mesh.measures.vertex_mu``, the area-weighted geometric mean) come with the result.
@@ -34,7 +37,7 @@ from ..mesh import topology
 from ..mesh.geometry import face_areas
 from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, vertex_mu
 from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_loose_edges, check_mesh, normalise_scale
-from .islands import boundary_crossings, seam_pairs
+from .islands import boundary_crossings, seam_pairs, shelf_pack
 from .islands import unwrap as unwrap_islands
 
 QC_WARN = 1.5            # an island whose area-weighted mean quasi-conformal distortion exceeds this warns
@@ -59,7 +62,10 @@ class UnwrapResult:
     - ``islands``: list of per-island report dicts (``island`` 1-based, ``triangles``, measures,
       ``warnings``; failed ones carry ``error``, ``error_problem``, ``error_code``, ``error_remedy``).
     - ``report``: summary dict (measures of the whole layout, counts, ``path`` 'disk' or 'islands').
-    - ``warnings``: list of str, one per problem found (empty for a clean result)."""
+    - ``warnings``: list of str, one per problem found (empty for a clean result).
+    - ``seams`` (k,2) int64: the seams the core chose (input vertex pairs; empty without ``cones``).
+    - ``cones``: list of (vertex, kappa) of the cone singularities (input vertex ids, radians; the
+      flattened angle at the vertex is 2*pi - kappa)."""
     uv_corner: np.ndarray
     flattened: np.ndarray
     face_island: np.ndarray
@@ -70,6 +76,8 @@ class UnwrapResult:
     islands: list = field(default_factory=list)
     report: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    seams: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    cones: list = field(default_factory=list)
 
 
 def _select(V, F, faces, seams):
@@ -158,6 +166,7 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
            fit: str = 'unit_square', island_scale: str = 'true', pack: bool = True, margin: float = 0.01,
            on_error: str = 'raise', max_faces: int | None = DEFAULT_MAX_FACES, edges=None,
            allow_loose: bool = False, progress: Callable[[float, str], None] | None = None,
+           cones: int | str | None = None, target_ratio: float = 0.5, max_cones: int = 48,
            **options) -> UnwrapResult:
     """Unwrap the triangle mesh ``V`` (n,3) float, ``F`` (m,3) int (counter-clockwise) to UVs.
 
@@ -172,7 +181,11 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
     none). edges: optional (e,2) all edges of the mesh, refused if some lie in no face (whole-mesh
     runs only). allow_loose: accept vertices in no face. progress: ``progress(fraction, message)``,
     called between steps and islands; an exception it raises (e.g. a cancellation) propagates.
-    Extra ``options`` go to ``flatten`` (e.g. ``bound``, optimiser settings).
+    cones: None (the seams given are the only cuts), 'auto' (automatic seams through cone
+    singularities: the fewest cones per part reaching ``target_ratio`` for the 1%/99% ratio of the
+    conformal factor, at most ``max_cones``), or an int cone budget per part; ``seams`` are then
+    ignored, and ``boundary``, ``holes`` and ``island_scale`` do not apply (each part keeps its
+    boundary lengths). Extra ``options`` go to ``flatten`` (e.g. ``bound``, optimiser settings).
 
     Returns ``UnwrapResult``. Raises ``ConformalError`` when no answer exists (the message names the
     problem; ``exc.remedy`` says what to do)."""
@@ -191,8 +204,38 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         ex = ', '.join(str(int(v)) for v in used[np.nonzero(bad)[0][:5]])
         raise ConformalError(f"mesh has {int(bad.sum())} vertex(es) with NaN or infinite coordinates "
                              f"(vertices {ex})", 'bad_coordinates', 'fix_coordinates')
-    disk, loops = _plain_disk(Vs, Fs, Ss, max_faces, allow_loose)
-    if disk:
+    auto_seams, cone_list = np.zeros((0, 2), np.int64), []
+    if cones is not None:
+        if not (cones == 'auto' or (isinstance(cones, (int, np.integer)) and cones >= 0)):
+            raise ConformalError(f"cones must be 'auto', a cone budget (an integer >= 0) or None, got {cones!r}")
+        if cones == 0:
+            cones = 'auto'
+        if edges is not None and whole:
+            check_loose_edges(edges, F)
+    disk, loops = (False, None) if cones is not None else _plain_disk(Vs, Fs, Ss, max_faces, allow_loose)
+    if cones is not None:
+        keep = np.zeros(len(Vs), bool)
+        keep[Fs.ravel()] = True
+        if not keep.all() and not allow_loose:
+            check_mesh(Vs, Fs, kind='surface', max_faces=max_faces, allow_parts=True)   # names them
+        uv_corner_s, isl, islands, seams_s, cone_s = cone_layout(
+            Vs, Fs, cones=cones, target_ratio=target_ratio, max_cones=max_cones, fit=fit, pack=pack,
+            margin=margin, progress=progress)
+        ok = np.isfinite(uv_corner_s).all(axis=(1, 2))
+        uv_s, F_uv_s = _shared_uv(Fs, uv_corner_s)
+        meas, mu_ok = _measure(Vs, Fs[ok], uv_corner_s[ok])
+        mu_s = np.full(len(Fs), np.nan)
+        mu_s[ok] = mu_ok
+        auto_seams = used[seams_s] if len(seams_s) else auto_seams
+        cone_list = [(int(used[v]), k) for v, k in cone_s]
+        summary = {'islands': len(islands), 'flattened': len(islands), 'failed': 0, 'holes_filled': 0,
+                   'holes_cut': 0, 'packed': bool(pack and len(islands) > 1), 'pack_efficiency': None,
+                   'bound_vertex': None, 'vertex_ratio': None, 'cones': len(cone_list),
+                   'seam_edges': int(len(auto_seams)),
+                   'seam_length': float(sum(r['seam_length'] for r in islands)),
+                   'seam_fraction': _seam_fraction(V, F, auto_seams),
+                   **{k: meas[k] for k in MEASURE_KEYS}}
+    elif disk:
         if edges is not None and whole:
             check_loose_edges(edges, F)
         uv_s, mu_s, rep = _disk(Vs, Fs, loops, boundary, fit, max_faces, progress, options)
@@ -246,9 +289,10 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         if 'error' in r:
             warnings.append(f"skipped {r['error']}")
             continue
-        r['warnings'] = island_warnings(r, desc)
+        r['warnings'] = island_warnings(r, desc) + [f"{desc}: {w}" for w in r.get('warnings', [])
+                                                     if cones is not None]
         warnings += r['warnings']
-    summary.update({'path': 'disk' if disk else 'islands', 'boundary': boundary, 'fit': fit,
+    summary.update({'path': 'cones' if cones is not None else 'disk' if disk else 'islands', 'boundary': boundary, 'fit': fit,
                     'holes': holes, 'island_scale': island_scale, 'triangles': int(m),
                     'vertices': int(len(V)), 'selected_triangles': int(len(sel)),
                     'flattened_triangles': int(flattened.sum()), 'seams': int(len(Ss)),
@@ -260,7 +304,32 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
                     'warnings': len(warnings)})
     return UnwrapResult(uv_corner=uv_corner, flattened=flattened, face_island=face_island, mu=mu,
                         mu_vertex=mu_vertex, uv=uv_s, F_uv=F_uv, islands=islands, report=summary,
-                        warnings=warnings)
+                        warnings=warnings, seams=auto_seams, cones=cone_list)
+
+
+def _shared_uv(F, uv_corner):
+    """Shared UV vertices of corner UVs: corners of one vertex with identical UVs (one wedge of an
+    island) share a UV vertex, like OBJ ``vt``. ``F`` (m,3), ``uv_corner`` (m,3,2). Returns (uv (N,2),
+    F_uv (m,3)); corners with NaN UVs get -1."""
+    m = len(F)
+    ok = np.isfinite(uv_corner).all(axis=2).ravel()
+    W = np.ascontiguousarray(uv_corner.reshape(-1, 2))
+    key = np.column_stack([F.ravel().astype(np.float64).view(np.int64),
+                           W[:, 0].view(np.int64), W[:, 1].view(np.int64)])
+    idx = np.nonzero(ok)[0]
+    _, first, inv = np.unique(key[idx], axis=0, return_index=True, return_inverse=True)
+    F_uv = np.full(3 * m, -1, np.int64)
+    F_uv[idx] = inv.ravel()
+    return W[idx[first]], F_uv.reshape(m, 3)
+
+
+def _seam_fraction(V, F, seams):
+    """Total length of the ``seams`` (k,2) over the total edge length of ``F``."""
+    if not len(seams):
+        return 0.0
+    E, _ = topology.unique_edges(F)
+    total = float(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).sum())
+    return float(np.linalg.norm(V[seams[:, 0]] - V[seams[:, 1]], axis=1).sum()) / total
 
 
 def true_scale(parts: Sequence[tuple]) -> list:
@@ -281,3 +350,75 @@ def true_scale(parts: Sequence[tuple]) -> list:
         return out
     s = np.sqrt(a3 / auv)
     return [W * s for W in out]
+
+
+def _cone_part(V, F, cones, target_ratio, max_cones, progress):
+    """One connected part through ``cone_unwrap``: the automatic budget (``cones`` 'auto') keeps the
+    best defect-free layout among ``max_cones`` and smaller budgets, since a layout that folds or
+    overlaps is worth less than one with fewer cones. Returns ``ConeResult``."""
+    from .cones import cone_unwrap
+    if cones != 'auto':
+        return cone_unwrap(V, F, cones=None, target_ratio=None, max_cones=int(cones), progress=progress)
+    best = None
+    budget = int(max_cones)
+    while True:
+        res = cone_unwrap(V, F, cones=None, target_ratio=target_ratio, max_cones=budget, progress=progress)
+        r = res.report
+        defects = r['flips'] + r['overlaps'] + r.get('degenerate', 0)
+        key = (defects == 0, -defects, r['mu_ratio_p1_p99'])
+        if best is None or key > best[0]:
+            best = (key, res)
+        if defects == 0 or budget <= 4:
+            return best[1]
+        budget = max(4, min(budget // 2, r['cones'] - 1))
+
+
+def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int = 48,
+                fit: str = 'unit_square', pack: bool = True, margin: float = 0.01,
+                progress: Callable[[float, str], None] | None = None):
+    """Automatic seams from cone singularities, part by part (docs/math.md §9).
+
+    ``V`` (n,3), ``F`` (m,3): a manifold mesh (one or several connected parts, closed or open, any
+    genus). cones: 'auto' (the fewest cones reaching ``target_ratio`` for the 1%/99% scale ratio, at
+    most ``max_cones``) or a cone budget per part (int). Returns (uv_corner (m,3,2), face_island (m,),
+    islands (list of report dicts), seams (k,2), cones (list of (vertex, kappa)))."""
+    report_progress = progress or (lambda f, msg: None)
+    n, m = len(V), len(F)
+    n_parts, part = topology.face_components(F, n)
+    uv_corner = np.full((m, 3, 2), np.nan)
+    islands, seams, cone_list, boxes = [], [], [], []
+    a_total = float(face_areas(V, F).sum())
+    done = 0.0
+    for p in range(n_parts):
+        tris = np.nonzero(part == p)[0]
+        used, Fp = np.unique(F[tris], return_inverse=True)
+        Fp = Fp.reshape(-1, 3)
+        share = len(tris) / m
+        sub = (lambda f, msg, b=done, w=share: report_progress(0.05 + 0.85 * (b + w * f), msg))
+        res = _cone_part(V[used], Fp, cones, target_ratio, max_cones, sub)
+        done += share
+        r = dict(res.report)
+        r.update({'island': p + 1, 'triangles': int(len(tris)), 'area_3d': float(face_areas(V[used], Fp).sum())})
+        islands.append(r)
+        uv_corner[tris] = res.uv
+        if len(res.seams):
+            seams.append(used[res.seams])
+        cone_list += [(int(used[c]), float(k)) for c, k in zip(res.cones, res.kappa)]
+        W = res.uv.reshape(-1, 2)
+        lo = W.min(0)
+        uv_corner[tris] -= lo
+        boxes.append(W.max(0) - lo)
+    boxes = np.array(boxes)
+    if pack and n_parts > 1:
+        size = np.sqrt((boxes[:, 0] * boxes[:, 1]).sum())
+        off, layout = shelf_pack(boxes, margin * size / max(1e-12, 1 - 2 * margin))
+        for p in range(n_parts):
+            uv_corner[part == p] += off[p]
+    else:
+        layout = (float(boxes[:, 0].max()), float(boxes[:, 1].max()))
+    if fit == 'unit_square':
+        uv_corner /= max(layout) if max(layout) > 0 else 1.0
+    seams = np.concatenate(seams) if seams else np.zeros((0, 2), np.int64)
+    for r in islands:
+        r['area_fraction'] = r['area_3d'] / a_total if a_total > 0 else 0.0
+    return uv_corner, part.astype(np.int64), islands, seams, cone_list

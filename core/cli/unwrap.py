@@ -15,7 +15,7 @@ from ..errors import ConformalError
 from ..disk.flatten import BOUNDARY_MODES
 from ..atlas.islands import FITS, HOLE_MODES, ISLAND_SCALES, seams_from_corner_ids
 from ..atlas.unwrap import unwrap
-from ..io.obj import text_lines, read_obj, write_obj
+from ..io.obj import text_lines, read_obj, write_obj, write_text
 from ..mesh.triangulate import triangulate
 from ..mesh.validate import DEFAULT_MAX_FACES
 
@@ -46,7 +46,31 @@ def add_arguments(p):
     p.add_argument('--ignore-loose', action='store_true', help='accept loose vertices and edges')
     p.add_argument('--skip-bad', action='store_true',
                    help='flatten the islands that can be flattened; the others get UV 0 and a warning')
+    p.add_argument('--cones', metavar='auto|N', type=auto_or_count, default=None,
+                   help='automatic seams through cone singularities (any mesh, closed ones too): "auto" '
+                        'for the fewest cones reaching --target-ratio, or a cone budget N per part; '
+                        'input seams are then ignored')
+    p.add_argument('--target-ratio', type=float, default=0.5,
+                   help='with --cones auto: the 1%%/99%% ratio of the conformal factor to reach (default 0.5)')
+    p.add_argument('--max-cones', type=int, default=48, help='with --cones auto: at most this many cones per '
+                   'part (default 48)')
+    p.add_argument('--seams-out', metavar='SEAMS.txt', default=None,
+                   help='write the seams the tool chose (with --cones), one 1-based vertex pair per line '
+                        '(default: OUTPUT with .seams.txt appended)')
     p.add_argument('--json', action='store_true', help='print the report (summary and islands) as JSON')
+
+
+def auto_or_count(text):
+    """'auto' or a non-negative integer."""
+    if text == 'auto':
+        return text
+    try:
+        k = int(text)
+    except ValueError:
+        raise ConformalError(f"--cones takes 'auto' or a number of cones, got {text!r}") from None
+    if k < 0:
+        raise ConformalError(f"--cones must not be negative, got {k}")
+    return k
 
 
 def read_seams(path, n):
@@ -110,7 +134,8 @@ def run(args):
     res = unwrap(mesh.V, F, seams=seams, boundary=args.boundary, holes=args.holes,
                  island_scale=args.island_scale, pack=not args.no_pack, margin=args.margin, fit=args.fit,
                  max_faces=args.max_faces, allow_loose=args.ignore_loose,
-                 on_error='skip' if args.skip_bad else 'raise', tri_poly=tri_poly)
+                 on_error='skip' if args.skip_bad else 'raise', tri_poly=tri_poly, cones=args.cones,
+                 target_ratio=args.target_ratio, max_cones=args.max_cones)
     # per-corner vt: every polygon corner takes the split vertex of its triangles' corner
     corner_vt = np.full(len(mesh.corner_verts), -1, np.int64)
     corner_vt[tri_corners.ravel()] = res.F_uv.ravel()
@@ -120,8 +145,14 @@ def run(args):
         polys, uv_polys = np.asarray(mesh.corner_verts).reshape(-1, 3), corner_vt.reshape(-1, 3)
     write_obj(args.output, mesh.V, polys, UV=res.uv, UV_faces=uv_polys)
     r = res.report
+    if args.cones is not None:
+        seams_out = args.seams_out or args.output + '.seams.txt'
+        write_text(seams_out, '# seam edges chosen with the cones: 1-based OBJ vertex pairs\n'
+                   + ''.join(f"{a} {b}\n" for a, b in (res.seams + 1).tolist()))
+        r['seams_file'] = seams_out
     if args.json:
-        print(json.dumps({'summary': r, 'islands': res.islands, 'warnings': res.warnings}))
+        print(json.dumps({'summary': r, 'islands': res.islands, 'warnings': res.warnings,
+                          'cones': [{'vertex': v, 'kappa': k, 'angle': 2 * np.pi - k} for v, k in res.cones]}))
     else:
         print(f"{r['islands']} island(s), {r['flattened']} flattened ({args.boundary}), holes filled "
               f"{r['holes_filled']}, cut {r['holes_cut']}: flips {r['flips']}, overlaps {r['overlaps']}, "
