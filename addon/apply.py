@@ -18,6 +18,7 @@ from .wording import island_error, message
 REPORT_KEY = 'conformal_flatten_report'
 ATTR_NAME = 'conformal_factor'           # FLOAT point attribute; colour: ATTR_NAME + '_color'
 RANGE_KEY = ATTR_NAME + '_range'         # mesh custom property [min, max] of the baked values
+CONE_ATTR = 'conformal_cones'            # FLOAT point attribute: cone curvature kappa (radians), 0 elsewhere
 MAX_ISLAND_REPORTS = 100                 # per-island entries kept in the stored report
 NO_VALUE_RGBA = (0.5, 0.5, 0.5, 1.0)     # colour of vertices without a baked value
 
@@ -139,6 +140,29 @@ def bake(me, mu_vertex: np.ndarray, colormap_name: str) -> tuple:
     return lo, hi
 
 
+def mark_seams(job, res) -> int:
+    """With automatic seams: make the core's seams (``res.result.seams``, vertex pairs) the mesh's UV
+    seams on the flattened faces, so the user sees and can edit them (seams='KEEP' then respects the
+    edits). Seams of edges outside the flattened faces are left as they were. Returns the count."""
+    me = job.obj.data
+    E = job.edges
+    inside = np.isfinite(res.result.mu_vertex[E]).all(axis=1)     # both ends on flattened faces
+    seams = meshio.read_seams(me)
+    seams[inside] = False
+    seams |= res.result.seam_mask(E)
+    meshio.write_seams(me, seams)
+    return int(len(res.result.seams))
+
+
+def write_cones(me, cones: list) -> None:
+    """The cone vertices as the FLOAT point attribute ``CONE_ATTR``: kappa (radians) at each cone,
+    0 elsewhere."""
+    vals = np.zeros(len(me.vertices))
+    for v, k in cones:
+        vals[v] = k
+    meshio.write_point_float(me, CONE_ATTR, vals)
+
+
 def island_summary(r: dict) -> dict:
     """The per-island entry of the stored report; a failed island's ``error`` in Blender wording."""
     keep = ('island', 'triangles', 'vertices', 'loops', 'holes', 'flips', 'mu_ratio', 'qc_mean',
@@ -158,6 +182,11 @@ def finish(job, res, uv_name: str, packer: str, pack_note: str | None, colormap:
     md = job.md
     core = res.report
     rng = bake(me, res.result.mu_vertex, colormap) if opts.bake else None
+    auto = opts.core_cones is not None
+    if auto:
+        mark_seams(job, res)
+        if opts.bake:
+            write_cones(me, res.result.cones)
     isl = res.islands
     polys = np.zeros(len(md.sizes), bool)
     polys[md.tri_poly[res.tris]] = True
@@ -168,7 +197,9 @@ def finish(job, res, uv_name: str, packer: str, pack_note: str | None, colormap:
         'triangles': int(len(res.tris)), 'selection': job.selection,
         'flattened_polygons': int(polys.sum()),
         'islands': core['islands'], 'islands_failed': core['failed'],
-        'seams': core['seams'], 'holes': opts.holes,
+        'seams': core['seams'], 'holes': opts.holes, 'seam_mode': opts.seams,
+        'cones': len(res.result.cones) if auto else None,
+        'seam_fraction': core.get('seam_fraction') if auto else None,
         'holes_filled': core['holes_filled'], 'holes_cut': core['holes_cut'],
         'relative_scale': 'true' if (opts.keep_relative_scale or core['islands'] == 1) else 'normalised',
         'packer': packer, 'pack_note': pack_note,

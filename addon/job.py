@@ -42,6 +42,16 @@ class FlattenOptions:
     shared_layout: bool = False
     colormap: str = None
     max_faces: int = 5_000_000
+    seams: str = 'KEEP'          # 'KEEP': the mesh's seams; 'AUTO': the core chooses seams through cones
+    cones: int = 0               # with 'AUTO': a cone budget per part, 0 = as few as reach target_ratio
+    target_ratio: float = 0.5
+
+    @property
+    def core_cones(self):
+        """The core's ``cones`` argument: None (keep the seams), 'auto' or a budget."""
+        if self.seams != 'AUTO':
+            return None
+        return 'auto' if self.cones == 0 else int(self.cones)
 
     @property
     def holes(self) -> str:
@@ -132,7 +142,7 @@ def compute_job(job: MeshJob, opts: FlattenOptions, progress=None,
                  boundary=opts.boundary.lower(), holes=opts.holes, fit=opts.fit.lower(),
                  island_scale='true' if opts.keep_relative_scale else 'normalise', pack=True, margin=0.01,
                  on_error='skip' if opts.skip_bad_islands else 'raise', max_faces=opts.max_faces,
-                 edges=job.edges, progress=step)
+                 edges=job.edges, progress=step, cones=opts.core_cones, target_ratio=opts.target_ratio)
     tris = np.nonzero(res.flattened)[0]
     out = JobResult(result=res, tris=tris, uv_tri=res.uv_corner[tris])
     step(1.0, 'flattened')

@@ -28,7 +28,7 @@ big meshes, so Esc cancels a long run; modal handlers never fire in background m
 import time
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
 
 from ..core.errors import ConformalError
 from . import meshio, targets
@@ -48,6 +48,12 @@ BOUNDARY_ITEMS = [
 FIT_ITEMS = [
     ('UNIT_SQUARE', "Unit Square", "Fit the UVs into the 0-1 square, keeping the aspect ratio"),
     ('TRUE_SCALE', "True Scale", "UV area equals the surface area, in mesh units"),
+]
+SEAM_ITEMS = [
+    ('KEEP', "Keep", "Use the mesh's own seams (Edge > Mark Seam); a closed part needs seams that cut it "
+                     "open"),
+    ('AUTO', "Automatic", "Choose seams through cone singularities for the most uniform scale, on any "
+                          "mesh (closed ones too), and mark them as the mesh's seams"),
 ]
 PACKER_ITEMS = [
     ('BLENDER', "Pack Islands", "Blender's Pack Islands (exact shapes, rotation); the core's shelf "
@@ -154,6 +160,14 @@ class UV_OT_conformal_flatten(bpy.types.Operator):
     bake: BoolProperty(name="Bake Conformal Factor", default=True,
                        description="Write mu as the point attribute 'conformal_factor' and the colour "
                                    "attribute 'conformal_factor_color'")
+    seams: EnumProperty(name="Seams", items=SEAM_ITEMS, default='KEEP',
+                        description="Where the mesh is cut open into islands")
+    cones: IntProperty(name="Cones", default=0, min=0, max=256,
+                       description="With automatic seams: the number of cone singularities per part "
+                                   "(0: as few as reach the target ratio)")
+    target_ratio: FloatProperty(name="Target Ratio", default=0.5, min=0.01, max=1.0, precision=2,
+                                description="With automatic seams and Cones 0: the ratio of the 1st to "
+                                            "the 99th percentile of the scale to reach")
     fill_holes: BoolProperty(name="Fill Holes", default=True,
                              description="Fill the holes of an island virtually for the computation (a "
                                          "temporary cap, removed afterwards); the longest boundary "
@@ -195,6 +209,12 @@ class UV_OT_conformal_flatten(bpy.types.Operator):
         col.prop(self, 'boundary')
         col.prop(self, 'fit')
         col.prop(self, 'bake')
+        col = layout.column(heading="Seams")
+        col.prop(self, 'seams')
+        sub = col.column()
+        sub.active = self.seams == 'AUTO'
+        sub.prop(self, 'cones')
+        sub.prop(self, 'target_ratio')
         col = layout.column(heading="Islands")
         col.prop(self, 'fill_holes')
         sub = col.row()
@@ -218,6 +238,7 @@ class UV_OT_conformal_flatten(bpy.types.Operator):
                               skip_bad_islands=self.skip_bad_islands, packer=self.packer,
                               pack_shape=self.pack_shape, pack_rotate=self.pack_rotate,
                               margin=self.margin, shared_layout=self.shared_layout,
+                              seams=self.seams, cones=self.cones, target_ratio=self.target_ratio,
                               colormap=get_prefs(context).colormap,
                               max_faces=get_prefs(context).max_faces)
 

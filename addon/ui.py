@@ -8,10 +8,10 @@ re-exported here).
 """
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, PointerProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
 from . import meshio
-from .ops_flatten import BOUNDARY_ITEMS, FIT_ITEMS, REPORT_KEY, UV_OT_conformal_flatten
+from .ops_flatten import BOUNDARY_ITEMS, FIT_ITEMS, REPORT_KEY, SEAM_ITEMS, UV_OT_conformal_flatten
 from .sidebar import (CATEGORY, PARENT_IDS, add_section, draw_report, fmt as _fmt,  # noqa: F401
                       register_tool, remove_section, sections, sub_panel_classes, unregister_tool)
 
@@ -26,6 +26,8 @@ FLATTEN_ROWS = [
     ("Certified bound", 'bound_vertex'),
     ("Flips", 'flips'),
     ("Qc mean", lambda r: _fmt(r.get('qc_mean'), '.4f')),
+    ("Cones", lambda r: "-" if r.get('cones') is None else
+        f"{r['cones']} (seams {100 * (r.get('seam_fraction') or 0):.1f}% of edge length)"),
     ("Mu range", lambda r: "-" if not r.get('conformal_factor_range') else
         "{:.3g} - {:.3g}".format(*r['conformal_factor_range'])),
     ("Time", lambda r: f"{r['seconds']['total']:.2f} s" if r.get('seconds') else "-"),
@@ -36,6 +38,10 @@ class ConformalFlattenSettings(bpy.types.PropertyGroup):
     boundary: EnumProperty(name="Boundary", items=BOUNDARY_ITEMS, default='UNIFORM')
     fit: EnumProperty(name="Fit", items=FIT_ITEMS, default='UNIT_SQUARE')
     bake: BoolProperty(name="Bake Conformal Factor", default=True)
+    seams: EnumProperty(name="Seams", items=SEAM_ITEMS, default='KEEP')
+    cones: IntProperty(name="Cones", default=0, min=0, max=256,
+                       description="Cones per part with automatic seams (0: as few as reach the target)")
+    target_ratio: FloatProperty(name="Target Ratio", default=0.5, min=0.01, max=1.0, precision=2)
 
 
 class _ConformalPanel:
@@ -50,8 +56,14 @@ class _ConformalPanel:
         col.prop(settings, 'boundary')
         col.prop(settings, 'fit')
         col.prop(settings, 'bake')
+        col.prop(settings, 'seams')
+        sub = col.column(align=True)
+        sub.active = settings.seams == 'AUTO'
+        sub.prop(settings, 'cones')
+        sub.prop(settings, 'target_ratio')
         op = col.operator(UV_OT_conformal_flatten.bl_idname, icon='UV')
         op.boundary, op.fit, op.bake = settings.boundary, settings.fit, settings.bake
+        op.seams, op.cones, op.target_ratio = settings.seams, settings.cones, settings.target_ratio
 
         obj = context.active_object
         report = meshio.load_report(obj.data, REPORT_KEY) if obj is not None and obj.type == 'MESH' else None

@@ -5,6 +5,7 @@ Note: ``ed.undo`` cannot run in background mode (its poll fails, checked below),
 exercised here; the operator's {'REGISTER', 'UNDO'} flags are, and so is the property undo relies on
 for failures: nothing is written unless the whole computation succeeded."""
 import bpy
+import json
 import os
 
 import numpy as np
@@ -520,3 +521,35 @@ def test_addon_files_small_and_free_of_math_and_topology():
                     if isinstance(sub, ast.Attribute) and isinstance(sub.value, ast.Name) and \
                             sub.value.id == 'np':
                         assert sub.attr not in forbidden_np, (f, node.name, sub.attr)
+
+
+def test_auto_seams_unwrap_a_closed_mesh(addon, bl):
+    """seams='AUTO' unwraps a closed mesh in one click: the chosen seams are marked on the mesh, the
+    cones baked, every corner gets a UV in [0,1] with no flipped triangle; re-running with
+    seams='KEEP' uses the marked seams (the user's to edit) and still succeeds."""
+    from conformal_flatten.core.mesh.measures import signed_uv_areas
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
+    obj = bpy.context.object
+    me = obj.data
+    with pytest.raises(RuntimeError, match='closed'):
+        bpy.ops.uv.conformal_flatten(seams='KEEP')
+    assert bpy.ops.uv.conformal_flatten(seams='AUTO', cones=0, target_ratio=0.5) == {'FINISHED'}
+    seams = np.zeros(len(me.edges), bool)
+    me.edges.foreach_get('use_seam', seams)
+    assert seams.any()
+    report = json.loads(me['conformal_flatten_report'])
+    assert report['cones'] >= 3 and report['flips'] == 0 and report['seam_mode'] == 'AUTO'
+    kappa = np.zeros(len(me.vertices), np.float32)
+    me.attributes['conformal_cones'].data.foreach_get('value', kappa)
+    assert np.count_nonzero(kappa) == report['cones']
+    assert abs(kappa.sum() - 4 * np.pi) < 1e-3                 # Gauss-Bonnet, chi = 2
+    uv = np.zeros(2 * len(me.loops), np.float32)
+    me.uv_layers.active.uv.foreach_get('vector', uv)
+    uv = uv.reshape(-1, 2)
+    assert uv.min() >= -1e-6 and uv.max() <= 1 + 1e-6
+    tris = np.array([[p.loop_start, p.loop_start + k, p.loop_start + k + 1] for p in me.polygons
+                     for k in range(1, p.loop_total - 1)])
+    a = signed_uv_areas(uv.astype(np.float64), tris)
+    assert (a > 0).all() or (a < 0).all()
+    # the marked seams now cut the sphere open: 'KEEP' works on them
+    assert bpy.ops.uv.conformal_flatten(seams='KEEP') == {'FINISHED'}

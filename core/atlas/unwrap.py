@@ -79,6 +79,11 @@ class UnwrapResult:
     seams: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
     cones: list = field(default_factory=list)
 
+    def seam_mask(self, E) -> np.ndarray:
+        """(e,) bool: which of the edges ``E`` (e,2) (vertex pairs, e.g. all edges of the mesh) are
+        among the chosen ``seams``."""
+        return topology.edge_mask(E, self.seams)
+
 
 def _select(V, F, faces, seams):
     """The sub-mesh of the triangles ``faces`` ((m,) bool or None). Returns (sel (k,) triangle ids,

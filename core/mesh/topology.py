@@ -115,3 +115,13 @@ def vertex_fans(F, n, twin=None):
     _, lab = connected_components(A, directed=False)
     pairs = np.unique(F.ravel().astype(np.int64) * (3 * m) + lab)
     return np.bincount(pairs // (3 * m), minlength=n)
+
+
+def edge_mask(E, pairs):
+    """(e,) bool: which edges of ``E`` (e,2) are among the undirected vertex ``pairs`` (k,2)."""
+    E = np.asarray(E, np.int64).reshape(-1, 2)
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    if len(E) == 0 or len(pairs) == 0:
+        return np.zeros(len(E), bool)
+    n = int(max(E.max(), pairs.max())) + 1
+    return np.isin(_keys(np.sort(E, axis=1), n), _keys(np.sort(pairs, axis=1), n))
