@@ -150,7 +150,8 @@ def mark_seams(job, res) -> int:
     seams = meshio.read_seams(me)
     seams[inside] = False
     seams |= res.result.seam_mask(E)
-    meshio.write_seams(me, seams)
+    me.edges.foreach_set('use_seam', seams)
+    me.update()
     return int(len(res.result.seams))
 
 

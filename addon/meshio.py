@@ -367,12 +367,6 @@ def read_seams(me):
     return out
 
 
-def write_seams(me, seams):
-    """Set the edges' UV seam flags (``use_seam``) to ``seams`` (e,) bool (call in Object mode)."""
-    me.edges.foreach_set('use_seam', np.asarray(seams, bool))
-    me.update()
-
-
 def read_point_float(me, name):
     """(n,) float64 values of the FLOAT point attribute ``name``, or None if it is absent or has
     another type or domain."""
