@@ -26,10 +26,19 @@ accurate everywhere, not only near the start: a triangle's log scale after ``phi
 log scale plus the mean of ``log P(c, x_k)`` over its three vertices (exact for small triangles). The
 common ``log(1 - |c|^2)`` drops out of every ratio. On that surrogate it runs a log-sum-exp soft
 max - min with a continuation in the sharpness ``beta`` and analytic gradients (scipy BFGS) from
-several starts (the three baselines, and points towards the smallest-mu region), then re-linearises at
-the best exact result and finally polishes the exact max/min objective with Nelder-Mead. Every
-candidate is measured exactly, the best one wins, and the baselines are candidates, so ``uniform`` is
-never worse than the best baseline.
+several starts (the three baselines, and points towards the smallest-mu region). The best exact
+candidate is then refined to a local minimax optimum of the *exact* objective (``_polish``):
+trust-region sequential linear programming on the epigraph form (minimise ``hi - lo`` subject to
+``lo <= l_t <= hi``), the per-triangle log scales linearised by central differences in the three
+ball parameters and re-linearised after every accepted step, until the predicted gain or the trust
+radius vanishes (``converged`` in the info). Every candidate is measured exactly and the baselines are
+candidates, so ``uniform`` is never worse than the best baseline that folds nothing.
+
+Folds. Faces that the map folded stay out of the objective. A Moebius map keeps the orientation of
+small triangles but can turn a needle whose vertices lie near a great circle, so no candidate may fold
+a face that the map did not fold: the baselines and the soft results are rejected if they do, and the
+polish carries orientation constraints (``orientation >= ORIENT_MARGIN``) for the least well oriented
+faces, adding every face that a step would fold and solving the step again.
 """
 import numpy as np
 import scipy.sparse as sp
