@@ -398,3 +398,22 @@ def test_pole_rotation():
         R = pole_rotation(V, k)
         assert np.allclose(R @ R.T, np.eye(3)) and np.isclose(np.linalg.det(R), 1)
         assert np.allclose(V[k] @ R.T, [0, 0, 1])
+
+
+def test_invariance_rigid_motion_scale_and_order():
+    """The uniform map's measures do not depend on a rotation, translation or scale of the mesh, nor on
+    the order of its vertices and faces (the sphere map is unique up to a Moebius map, which the
+    optimiser then fixes)."""
+    V, F = blob(6, bumps=((0, 0, 1, 1.5), (1, 0, 0, 0.7)), width=0.1)
+    ref = sphere_map(V, F).report
+    rng = np.random.default_rng(3)
+    Q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    Q *= np.sign(np.linalg.det(Q))
+    r = sphere_map(7.5 * V @ Q.T + [1.0, -2.0, 3.0], F).report
+    for k in ('mu_ratio', 'qc_mean', 'flips'):
+        assert r[k] == pytest.approx(ref[k], rel=1e-6), k
+    pv, pf = rng.permutation(len(V)), rng.permutation(len(F))
+    inv = np.argsort(pv)
+    r = sphere_map(V[pv], inv[F[pf]]).report
+    assert r['flips'] == 0 and r['mu_ratio'] == pytest.approx(ref['mu_ratio'], rel=1e-3)
+    assert r['qc_mean'] == pytest.approx(ref['qc_mean'], rel=1e-3)

@@ -5,10 +5,12 @@ The UV layout of a sphere map is the equirectangular one, ``u = longitude / 2 pi
 flipped UV triangle, split per corner along a seam):
 
 1. Poles on vertices. The sphere is rotated so that a vertex ``a`` sits at the north pole (rotations
-   leave the conformal factor unchanged). For the layout only, the vertex ``b`` nearest the south pole
-   is moved to the south pole by the Moebius map ``w -> w / (1 - w / w_b)`` of the stereographic chart
-   ``w`` (it fixes the north pole; ``b`` is nearly antipodal, so it is close to the identity). No
-   polygon then contains a pole in its interior, and the longitude is continuous inside every polygon.
+   leave the conformal factor unchanged); ``a`` is chosen where the sphere's triangles are small, as
+   the layout shears big triangles near a pole (``pole_candidates``). For the layout only, the vertex
+   ``b`` nearest the south pole is moved to the south pole by the Moebius map ``w -> w / (1 - w / w_b)``
+   of the stereographic chart ``w`` (it fixes the north pole; ``b`` is nearly antipodal, so it is close
+   to the identity). No polygon then contains a pole in its interior, and the longitude is continuous
+   inside every polygon.
 2. Poles per corner. A corner at a pole takes the mean u of its polygon's other corners: a triangle
    (pole, p, q) then keeps its orientation in UV (its UV area is ``(u_q - u_p)(2 - v_p - v_q) / 4 > 0``
    at the north pole, and the mirror at the south pole).
@@ -28,6 +30,7 @@ from ..mesh.measures import signed_uv_areas, vertex_mu
 from .map import from_sphere, to_sphere
 
 POLE_TOL = 1e-12          # |(x, y)| below this on the unit sphere: the vertex sits at a pole
+POLE_TRIES = 6            # candidate pole vertices tried for a layout without flipped UV triangles
 
 
 def every_edge_twice(corner_edges: np.ndarray, n_edges: int) -> bool:
@@ -65,6 +68,22 @@ def layout_sphere(unit: np.ndarray) -> tuple:
         X[ok] = to_sphere(g[ok])
     X[b] = (0.0, 0.0, -1.0)
     return X, b
+
+
+def pole_candidates(S: np.ndarray, F: np.ndarray, k: int = POLE_TRIES) -> list:
+    """Up to ``k`` candidate north-pole vertices for the UV layout of the sphere map ``S`` (n,3) with
+    faces ``F`` (m,3), best first: the equirectangular layout shears triangles near the poles, and big
+    ones there can turn over, so the poles go where the sphere's triangles are small. Score of a vertex
+    ``a``: the flat sphere area around ``a`` plus that around the vertex nearest ``-S[a]`` (the south
+    pole of the layout); the 64 vertices with the smallest area around them are scored."""
+    P = S[F]
+    a = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
+    va = np.bincount(F.ravel(), np.repeat(a, 3), minlength=len(S))
+    va = np.where(np.bincount(F.ravel(), minlength=len(S)) > 0, va, np.inf)     # loose vertices: never
+    cand = np.argsort(va, kind='stable')[:64]
+    south = np.argmin(S @ S[cand].T, axis=0)
+    score = va[cand] + va[south]
+    return [int(x) for x in cand[np.argsort(score, kind='stable')[:k]]]
 
 
 def spherical_uv(X: np.ndarray, corner_verts: np.ndarray, sizes: np.ndarray,
@@ -136,8 +155,9 @@ def sphere_layout(V: np.ndarray, F: np.ndarray, S: np.ndarray, mu: np.ndarray, c
     ``sizes`` (p,) triangulated by ``tri_corners`` (m,3) corner indices (default: the polygons are the
     triangles ``F``).
 
-    Returns a dict: ``unit`` (n,3) unit-sphere positions rotated so that the highest vertex sits at the
-    north pole (same conformal factor), ``north`` and ``south`` (the pole vertices of the UV layout),
+    Returns a dict: ``unit`` (n,3) unit-sphere positions rotated so that the vertex ``north`` sits at
+    the north pole (same conformal factor; the first of ``pole_candidates`` whose layout flips no UV
+    triangle, else the one that flips fewest), ``north`` and ``south`` (the layout's pole vertices),
     ``key`` (n,3) the sphere with the mesh's surface area (radius ``sqrt(A / 4 pi)``, units of V)
     centred at the mesh's area centroid ``centre`` (3,), ``radius``, ``loop_uv`` (c,2) spherical UVs
     (``spherical_uv``), ``mu_vertex`` (n,) (``core.mesh.measures.vertex_mu``), and the layout's
@@ -148,11 +168,17 @@ def sphere_layout(V: np.ndarray, F: np.ndarray, S: np.ndarray, mu: np.ndarray, c
     F = np.asarray(F, np.int64)
     S = np.asarray(S, np.float64)
     S = S / np.linalg.norm(S, axis=1)[:, None]
-    north = int(np.argmax(S[:, 2]))
-    unit = S @ pole_rotation(S, north).T
-    unit[north] = (0.0, 0.0, 1.0)
-    X, south = layout_sphere(unit)
-    loop_uv, info = spherical_uv(X, corner_verts, sizes, tri_corners)
+    best = None
+    for north in pole_candidates(S, F):
+        unit = S @ pole_rotation(S, north).T
+        unit[north] = (0.0, 0.0, 1.0)
+        X, south = layout_sphere(unit)
+        loop_uv, info = spherical_uv(X, corner_verts, sizes, tri_corners)
+        if best is None or info['uv_flips'] < best[3]['uv_flips']:
+            best = (north, south, unit, info, loop_uv)
+        if info['uv_flips'] == 0:
+            break
+    north, south, unit, info, loop_uv = best
     A = face_areas(V, F)
     centre = (V[F].mean(1) * A[:, None]).sum(0) / A.sum()
     radius = float(np.sqrt(A.sum() / (4 * np.pi)))
