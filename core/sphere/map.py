@@ -165,7 +165,7 @@ RINGS = (6, 5, 4, 3, 2, 1)
 MOLLIFY_DELTA = 1e-4      # intrinsic mollification margin, relative to the mean edge length
 FLOW_DT = 1.0             # harmonic map flow step on the unit sphere (dimensionless)
 FLOW_STEPS = 8            # at most this many flow steps
-FLOW_TOL = 1e-4           # stop when no vertex moves more than this (unit sphere)
+FLOW_TOL = 1e-4           # stop when the corner angles change by less than this (mean, radians)
 QC_WARN = 1.5             # qc_mean above this gets a warning
 
 
@@ -243,12 +243,17 @@ def conformal_sphere(V, F, progress=None):
     if f1 > f0:                               # never trade the chart's orientation for angles
         S, steps = S0, 0
     return S, {'pole_triangle': int(t), 'pole_rings': int(kout), 'intrinsic': idt,
-               'flow_steps': int(steps), 'flow_last_move': float(move), 'chart_flips': int(f0)}
+               'flow_steps': int(steps), 'flow_last_angle_change': float(move), 'chart_flips': int(f0)}
 
 
 def _count_flips(F, S):
     P = S[F]
     return int(((np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]) * P.mean(1)).sum(1) <= 0).sum())
+
+
+def _corner_angles(X, F):
+    """(m,3) corner angles (radians) of the flat triangles of ``X`` (n,3)."""
+    return corner_angles(X, F)
 
 
 def _flat_mass(X, F):
@@ -288,7 +293,9 @@ def harmonic_flow(S, F, L, steps=None, dt=FLOW_DT, tol=FLOW_TOL):
     triangles (unit sphere, so ``dt`` is dimensionless); then ``X'`` is centred at its area centroid and
     projected to the unit sphere. The fixed point is ``L X = M diag(k) X``: the discrete harmonic map
     to the sphere, which for genus 0 is the conformal map. Started from the chart map it converges in
-    a few steps. Returns (S (n,3), steps taken, last largest vertex move)."""
+    a few steps; it stops when a step changes the corner angles of the flat sphere triangles by less
+    than ``tol`` radians on average (the Moebius drift that the centring causes does not count: it
+    hardly changes angles). Returns (S (n,3), steps taken, last mean angle change in radians)."""
     steps = FLOW_STEPS if steps is None else steps
     X = S
     move = 0.0
@@ -307,7 +314,7 @@ def harmonic_flow(S, F, L, steps=None, dt=FLOW_DT, tol=FLOW_TOL):
         ay = 0.5 * np.linalg.norm(np.cross(Pa[:, 1] - Pa[:, 0], Pa[:, 2] - Pa[:, 0]), axis=1)
         Y = Y - (Pa.mean(1) * ay[:, None]).sum(0) / ay.sum()
         Y = Y / np.linalg.norm(Y, axis=1)[:, None]
-        move = float(np.abs(Y - X).max())
+        move = float(np.abs(_corner_angles(Y, F) - _corner_angles(X, F)).mean())
         X = Y
         if move < tol:
             break
