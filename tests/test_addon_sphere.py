@@ -157,3 +157,22 @@ def test_core_layout_has_no_bpy_math():
     """Issue #11: the layout lives in the core; the operator module has no spherical_uv/pole_rotation."""
     import conformal_flatten.addon.ops_sphere as ops
     assert not hasattr(ops, 'spherical_uv') and not hasattr(ops, 'pole_rotation')
+
+
+def test_quad_cube_uvs_inside_unit_square_without_flips(addon, bl):
+    """Issue #12: a cube of 6 quads had u in [-0.30, 1.23] and 2 of 12 UV triangles flipped. Now every
+    UV lies in [0,1], no quad is flipped in UV, and the report counts UV flips apart from sphere folds."""
+    V = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    quads = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]])
+    c = V[quads].mean(1)
+    n = np.cross(V[quads[:, 1]] - V[quads[:, 0]], V[quads[:, 2]] - V[quads[:, 0]])
+    quads[(n * c).sum(1) < 0] = quads[(n * c).sum(1) < 0][:, ::-1]          # outward
+    obj = bl.mesh_object('cube', V, quads)
+    assert bpy.ops.uv.conformal_sphere(moebius='UNIFORM', bake=True) == {'FINISHED'}
+    rep = addon.addon.meshio.load_report(obj.data, 'conformal_sphere_report')
+    W = loop_uv(obj.data)
+    assert W.min() >= 0 and W.max() <= 1
+    assert rep['flips'] == 0 and rep['uv_flips'] == 0 and rep['triangles'] == 12
+    Q = W.reshape(-1, 4, 2)                                                   # shoelace area per quad
+    area = 0.5 * (Q[:, :, 0] * np.roll(Q[:, :, 1], -1, 1) - np.roll(Q[:, :, 0], -1, 1) * Q[:, :, 1]).sum(1)
+    assert (area > 0).all()

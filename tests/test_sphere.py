@@ -417,3 +417,11 @@ def test_invariance_rigid_motion_scale_and_order():
     r = sphere_map(V[pv], inv[F[pf]]).report
     assert r['flips'] == 0 and r['mu_ratio'] == pytest.approx(ref['mu_ratio'], rel=1e-3)
     assert r['qc_mean'] == pytest.approx(ref['qc_mean'], rel=1e-3)
+
+
+def test_warnings_name_each_problem():
+    from core.sphere.map import sphere_warnings
+    ok = {'flips': 0, 'faces': 100, 'qc_mean': 1.1, 'moebius_converged': True}
+    assert sphere_warnings(ok) == []
+    w = sphere_warnings(dict(ok, flips=3, qc_mean=1.7, moebius_converged=False))
+    assert len(w) == 3 and '3 of 100' in w[0] and '1.7' in w[1] and 'Moebius' in w[2]
