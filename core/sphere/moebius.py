@@ -324,8 +324,8 @@ def _slp_step(T, F, A, act, guard, rho):
     ``T`` (n,3) itself (c = 0): with ``l_t(q)`` the exact per-triangle log scales of ``phi_c(q)(T)`` on
     the faces ``act`` (k,) and ``o_g(q)`` the orientations of the faces ``guard`` (g,), both linearised
     by central differences, minimise ``hi - lo`` subject to ``lo <= l_t + J_t q <= hi``,
-    ``o_g + G_g q >= ORIENT_MARGIN`` and ``|q_i| <= rho``. Returns (ball point c (3,), predicted
-    decrease of max l - min l on ``act``)."""
+    ``o_g + G_g q >= min(o_g, ORIENT_MARGIN)`` and ``|q_i| <= rho``. Returns (ball point c (3,),
+    predicted decrease of max l - min l on ``act``, whether the LP solver succeeded)."""
     sel = np.r_[act, guard]
     used, Fl = np.unique(F[sel], return_inverse=True)
     Fl = Fl.reshape(-1, 3)
@@ -350,12 +350,12 @@ def _slp_step(T, F, A, act, guard, rho):
     A_ub[:na, :3], A_ub[:na, 3] = Jl, -1.0
     A_ub[na:2 * na, :3], A_ub[na:2 * na, 4] = -Jl, 1.0
     A_ub[2 * na:, :3] = -Jo
-    b_ub = np.r_[-l, l, o - ORIENT_MARGIN]
+    b_ub = np.r_[-l, l, np.maximum(o - ORIENT_MARGIN, 0.0)]           # q = 0 is always feasible
     res = linprog(np.array([0.0, 0.0, 0.0, 1.0, -1.0]), A_ub=A_ub, b_ub=b_ub,
                   bounds=[(-rho, rho)] * 3 + [(None, None)] * 2, method='highs')
     if res.status != 0:
-        return np.zeros(3), 0.0
-    return _from_q(res.x[:3])[0], float(l.max() - l.min() - res.fun)
+        return np.zeros(3), 0.0, False
+    return _from_q(res.x[:3])[0], float(l.max() - l.min() - res.fun), True
 
 
 def _polish(T, F, A, best_r, iters=POLISH_ITERS):
@@ -374,7 +374,9 @@ def _polish(T, F, A, best_r, iters=POLISH_ITERS):
     l = log_scale(T, F, A)
     for _ in range(iters):
         act = _active(l, 2.0 * np.sqrt(3.0) * rho + 1e-2)
-        c, pred = _slp_step(T, F, A, act, guard, rho)
+        c, pred, ok = _slp_step(T, F, A, act, guard, rho)
+        if not ok:
+            break
         if pred <= POLISH_RTOL * max(float(l.max() - l.min()), 1.0) or rho < POLISH_RTOL:
             converged = True
             break
@@ -407,8 +409,11 @@ def optimise(S, F, A, mode='uniform', progress=None, starts=3):
     soft max-min continuation.
 
     Returns ``(S2 (n,3) transformed unit vectors, info dict)``; ``info`` has the ball point ``c``
-    (list of 3 floats; ``phi_c`` maps it to the centre), for ``uniform`` the realised ratio of every
-    baseline (``baselines``) and the number of exact objective evaluations."""
+    (list of 3 floats; ``phi_c`` maps it to the centre), and for ``uniform``: the realised ratio of
+    every baseline (``baselines``), the chosen ``ratio``, the number of exact objective
+    ``evaluations``, ``converged`` (the local minimax refinement reached first-order optimality),
+    ``guarded_faces`` (faces under an orientation constraint) and ``excluded_flipped`` (faces the map
+    folded, left out of the objective)."""
     report = progress or (lambda f, msg: None)
     S = _unit(np.asarray(S, np.float64))
     F = np.asarray(F, np.int64)
@@ -432,7 +437,10 @@ def optimise(S, F, A, mode='uniform', progress=None, starts=3):
     # faces the map folded stay folded under any Moebius map: leave them out of the objective
     P = S[F]
     flipped = (np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]) * P.mean(1)).sum(1) <= 0
-    if flipped.any() and not flipped.all():
+    if flipped.all():                        # nothing is oriented: no objective to optimise
+        info.update(c=[0.0, 0.0, 0.0], ratio=exact_ratio(S, F, A), evaluations=1, converged=False)
+        return S, info
+    if flipped.any():
         F, A = F[~flipped], A[~flipped]
         info['excluded_flipped'] = int(flipped.sum())
     report(0.0, 'Moebius baselines')
