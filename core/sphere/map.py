@@ -169,10 +169,13 @@ FLOW_TOL = 1e-4           # stop when the corner angles change by less than this
 QC_WARN = 1.5             # qc_mean above this gets a warning
 
 
-def conformal_sphere(V, F, progress=None):
+def conformal_sphere(V: np.ndarray, F: np.ndarray, progress=None) -> tuple:
     """Conformal map of a closed genus-0 triangle mesh to the unit sphere (method in the module
     docstring). ``V`` (n,3), ``F`` (m,3); the mesh must already pass ``check_mesh(kind='sphere')``.
-    Returns ``(S (n,3) unit vectors, info dict)``."""
+    Returns ``(S (n,3) unit vectors, info dict)``: ``pole_triangle``, ``pole_rings``, ``intrinsic``
+    (the intrinsic Delaunay report: ``flips``, ``eps`` in units of V, ``negative_before``,
+    ``negative_after``, ``converged``), ``flow_steps``, ``flow_last_angle_change`` (radians),
+    ``chart_flips`` (folds of the chart map before the flow)."""
     from ..disk.flatten import flatten
     report = progress or (lambda f, msg: None)
     V = np.asarray(V, np.float64)
@@ -251,11 +254,6 @@ def _count_flips(F, S):
     return int(((np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]) * P.mean(1)).sum(1) <= 0).sum())
 
 
-def _corner_angles(X, F):
-    """(m,3) corner angles (radians) of the flat triangles of ``X`` (n,3)."""
-    return corner_angles(X, F)
-
-
 def _flat_mass(X, F):
     """(n,) lumped mass: a third of the flat triangle areas of ``X`` (n,3) around each vertex."""
     P = X[F]
@@ -286,7 +284,8 @@ def _pcg(K, B, pre, X0, rtol=1e-10, maxiter=100):
     return X
 
 
-def harmonic_flow(S, F, L, steps=None, dt=FLOW_DT, tol=FLOW_TOL):
+def harmonic_flow(S: np.ndarray, F: np.ndarray, L: sp.spmatrix, steps: int | None = None,
+                  dt: float = FLOW_DT, tol: float = FLOW_TOL) -> tuple:
     """Polish a conformal sphere map ``S`` (n,3) unit vectors by projected backward-Euler steps of the
     harmonic map flow (docs/math.md, sphere mode): ``(M + dt L) X' = M X`` with ``L`` (n,n) the fixed
     (intrinsic Delaunay) cotan Laplacian and ``M`` the lumped mass of the current flat sphere
@@ -314,7 +313,7 @@ def harmonic_flow(S, F, L, steps=None, dt=FLOW_DT, tol=FLOW_TOL):
         ay = 0.5 * np.linalg.norm(np.cross(Pa[:, 1] - Pa[:, 0], Pa[:, 2] - Pa[:, 0]), axis=1)
         Y = Y - (Pa.mean(1) * ay[:, None]).sum(0) / ay.sum()
         Y = Y / np.linalg.norm(Y, axis=1)[:, None]
-        move = float(np.abs(_corner_angles(Y, F) - _corner_angles(X, F)).mean())
+        move = float(np.abs(corner_angles(Y, F) - corner_angles(X, F)).mean())
         X = Y
         if move < tol:
             break
@@ -371,12 +370,16 @@ def sphere_warnings(report: dict) -> list:
     return out
 
 
-def sphere_map(V, F, moebius='uniform', max_faces=DEFAULT_MAX_FACES, progress=None, **options):
+def sphere_map(V: np.ndarray, F: np.ndarray, moebius: str = 'uniform', max_faces: int = DEFAULT_MAX_FACES,
+               progress=None, **options) -> SphereResult:
     """Map a closed genus-0 triangle mesh conformally to the unit sphere and choose the Moebius
     transformation. ``V`` (n,3) float, ``F`` (m,3) int counter-clockwise; ``moebius`` one of
     ``MOEBIUS_MODES``; ``progress(fraction, message)`` optional. Extra ``options`` go to
-    ``core.moebius.optimise``. Returns ``SphereResult``; raises ``ConformalError`` on bad input
-    (open mesh, higher genus, degenerate faces...)."""
+    ``core.sphere.moebius.optimise``. Returns ``SphereResult``; its report has the measures (``flips``
+    are folds of the sphere map), the Moebius info (``baselines``, ``moebius_converged``, ...), the
+    map's info (``conformal_sphere``) and ``warnings`` (list of str, ``sphere_warnings``: empty only
+    for a clean result). Raises ``ConformalError`` on bad input (open mesh, higher genus, degenerate
+    faces...)."""
     if moebius not in MOEBIUS_MODES:
         raise ConformalError(f"unknown Moebius mode {moebius!r}: use one of {', '.join(MOEBIUS_MODES)}")
     report_progress = progress or (lambda f, msg: None)

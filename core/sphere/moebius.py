@@ -289,7 +289,7 @@ def _starts(sur, extra=(0.25, 0.5)):
     return [np.tanh(0.5 * t * spread) * x / nx for t in extra]
 
 
-def flip_count(S, F, c=None):
+def flip_count(S: np.ndarray, F: np.ndarray, c: np.ndarray | None = None) -> int:
     """Triangles ``F`` (m,3) whose flat image under ``phi_c(S)`` (``S`` (n,3) unit vectors; ``c`` None:
     ``S`` itself) faces the centre. A Moebius map keeps small triangles' orientation but can turn a
     needle whose vertices lie near a great circle."""
@@ -307,7 +307,7 @@ def _active(l, band, cap=ACTIVE_CAP):
     return np.unique(np.r_[lo, o[len(o) - hi_n:]])
 
 
-def orientation(S, F, c=None):
+def orientation(S: np.ndarray, F: np.ndarray, c: np.ndarray | None = None) -> np.ndarray:
     """Scale-free orientation of the flat triangles of ``phi_c(S)`` (``S`` (n,3) unit vectors, ``F``
     (k,3)): ``det(a, b, c) / (|a - b| |b - c| |c - a|)`` (k,), positive when the image faces outwards;
     about the distance of the three points from a great circle relative to the triangle's size."""
@@ -402,7 +402,8 @@ def _polish(T, F, A, best_r, iters=POLISH_ITERS):
     return cs, T, best_r, evals, converged, len(guard)
 
 
-def optimise(S, F, A, mode='uniform', progress=None, starts=3):
+def optimise(S: np.ndarray, F: np.ndarray, A: np.ndarray, mode: str = 'uniform', progress=None,
+             starts: int = 3) -> tuple:
     """Choose the Moebius transformation for sphere points ``S`` (n,3) (unit vectors) of the mesh
     faces ``F`` (m,3) with 3D areas ``A`` (m,). ``mode``: one of ``MOEBIUS_MODES``. ``starts``: how
     many of the candidate start points (baselines and points towards the smallest mu) run the full
