@@ -9,11 +9,12 @@ Writes, once everything is computed (a failure leaves the mesh untouched):
 - FLOAT_VECTOR point attribute ``sphere_position``: the unit-sphere position of each vertex;
 - with ``bake``: mu per vertex as ``conformal_factor`` and ``conformal_factor_color`` (as the flatten
   operator does);
-- spherical UVs (longitude, latitude) per corner into the active UV map, split along the seam at
-  longitude 180 degrees: a polygon that crosses the seam gets continuous UVs past u = 1; a corner at a
-  pole takes the mean u of its polygon's other corners; the sphere is rotated (which leaves mu
-  unchanged) so that the north pole sits on a vertex, and a polygon that encloses the south pole gets
-  its corners' longitudes unwrapped around it.
+- spherical UVs (longitude, latitude) per corner into the active UV map, all in [0,1], split along a
+  seam near longitude 180 degrees, poles on vertices (``core.sphere.layout``); UV flips are reported
+  separately from the sphere map's folds.
+
+A map with folded triangles, poor conformality or an unconverged Moebius optimiser is reported as
+WARNING (the core's ``report['warnings']``), as is a UV layout with flipped triangles.
 
 Synchronous ``execute``, like the flatten operator (headless scripts and tests run the same path)."""
 import time
@@ -23,7 +24,7 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty
 
 from ..core.errors import ConformalError
-from ..core.mesh.geometry import face_areas
+from ..core.sphere.layout import every_edge_twice, sphere_layout
 from ..core.sphere.map import sphere_map
 from . import meshio
 from .prefs import get_prefs
@@ -41,82 +42,14 @@ MOEBIUS_ITEMS = [
 ]
 
 
-# --- pure computations (no bpy data written) -----------------------------------------------------
-def pole_rotation(S, k):
-    """Rotation matrix (3,3) taking the unit vector ``S[k]`` to the north pole (0,0,1)."""
-    a = S[k] / np.linalg.norm(S[k])
-    z = np.array([0.0, 0.0, 1.0])
-    v = np.cross(a, z)
-    s, c = np.linalg.norm(v), float(a @ z)
-    if s < 1e-15:
-        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
-    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]]) / s
-    return np.eye(3) + s * K + (1 - c) * (K @ K)
-
-
-def spherical_uv(S, corner_verts, sizes):
-    """Per-corner UVs (c,2) of unit-sphere positions ``S`` (n,3): u = longitude / 2 pi + 0.5,
-    v = latitude / pi + 0.5, split along the seam at u = 0/1 (see the module docstring). Returns
-    (uv, pole_polygons) with the number of polygons that enclose a pole."""
-    x, y, z = S[:, 0], S[:, 1], S[:, 2]
-    lon = np.arctan2(y, x)
-    lat = np.arctan2(z, np.hypot(x, y))
-    at_pole = np.hypot(x, y) < 1e-9
-    u = lon[corner_verts] / (2 * np.pi) + 0.5
-    v = lat[corner_verts] / np.pi + 0.5
-    p = len(sizes)
-    poly = np.repeat(np.arange(p), sizes)
-    start = np.r_[0, np.cumsum(sizes)[:-1]]
-    pole_c = at_pole[corner_verts]
-    # winding of each polygon around the pole axis: sum of wrapped longitude steps (pole corners skipped)
-    nxt = np.arange(len(corner_verts)) + 1
-    nxt[np.cumsum(sizes) - 1] = start
-    d = u[nxt] - u
-    d = np.where(pole_c | pole_c[nxt], 0.0, d - np.round(d))
-    wind = np.bincount(poly, d, minlength=p)
-    encl = np.abs(wind) > 0.5
-    # ordinary polygons: bring every corner within half a turn of the polygon's first non-pole corner
-    ref_c = np.where(pole_c, np.inf, np.arange(len(u)))
-    first = np.minimum.reduceat(ref_c, start)
-    ref = np.where(np.isfinite(first), u[np.where(np.isfinite(first), first, 0).astype(np.int64)], 0.5)
-    u = u - np.round(u - ref[poly])
-    # polygons enclosing a pole: unwrap the longitude continuously around the polygon
-    for q in np.nonzero(encl)[0].tolist():
-        s, k = start[q], sizes[q]
-        steps = d[s:s + k - 1]
-        uu = u[s] + np.r_[0.0, np.cumsum(steps)]
-        u[s:s + k] = uu - np.floor(uu.mean())
-    # shift polygons so that their mean u lies in [0, 1)
-    cnt = np.bincount(poly, ~pole_c, minlength=p)
-    mean = np.bincount(poly, np.where(pole_c, 0.0, u), minlength=p) / np.maximum(cnt, 1)
-    u = u - np.floor(mean)[poly]
-    # corners on a pole: the mean u of the polygon's other corners
-    mean = np.bincount(poly, np.where(pole_c, 0.0, u), minlength=p) / np.maximum(cnt, 1)
-    u = np.where(pole_c, mean[poly], u)
-    return np.stack([u, v], 1), int(encl.sum())
-
-
+# --- the computation (core) -------------------------------------------------------------------------
 def compute_sphere(md, moebius='UNIFORM', progress=None):
-    """Map ``md`` (``meshio.MeshArrays`` with triangles) to the sphere. Returns a dict of everything
-    to write: ``unit`` (n,3) rotated unit-sphere positions, ``key`` (n,3) shape key positions,
-    ``loop_uv`` (c,2), ``mu_vertex`` (n,), ``result`` (the core's ``SphereResult``), ``pole_polygons``.
-    Raises ``ConformalError``."""
-    F = md.F
-    res = sphere_map(md.V, F, moebius=moebius.lower(), progress=progress)
-    S = res.S / np.linalg.norm(res.S, axis=1)[:, None]
-    R = pole_rotation(S, int(np.argmax(S[:, 2])))
-    unit = S @ R.T
-    A = face_areas(md.V, F)
-    centre = (md.V[F].mean(1) * A[:, None]).sum(0) / A.sum()
-    radius = np.sqrt(A.sum() / (4 * np.pi))
-    loop_uv, pole_polygons = spherical_uv(unit, md.corner_verts, md.sizes)
-    mu_vertex = meshio.face_to_vertex(F, res.mu, A, md.n_vertices, power=2.0)
-    out = dict(unit=unit, key=centre + radius * unit, loop_uv=loop_uv, mu_vertex=mu_vertex, result=res,
-               pole_polygons=pole_polygons, radius=float(radius), centre=centre.tolist())
-    for k in ('unit', 'key', 'loop_uv'):
-        if not np.isfinite(out[k]).all():
-            raise ConformalError("the sphere map produced non-finite positions: the mesh is too "
-                                 "degenerate; clean it up (merge by distance, dissolve degenerate faces)")
+    """Map ``md`` (``meshio.MeshArrays`` with triangles) to the sphere and lay it out
+    (``core.sphere.layout.sphere_layout``). Returns that dict plus ``result`` (the core's
+    ``SphereResult``). Raises ``ConformalError``."""
+    res = sphere_map(md.V, md.F, moebius=moebius.lower(), progress=progress)
+    out = sphere_layout(md.V, md.F, res.S, res.mu, md.corner_verts, md.sizes, md.tri_corners)
+    out['result'] = res
     return out
 
 
@@ -159,6 +92,9 @@ def sphere_object(context, obj, moebius='UNIFORM', bake=True, colormap=None):
         t_write = time.perf_counter() - t
         progress(1.0, 'done')
         core = out['result'].report
+        warnings = list(core.get('warnings', []))
+        if out['uv_flips']:
+            warnings.append(f"{out['uv_flips']} UV triangles are flipped in the spherical UV layout")
         report = {
             'object': obj.name, 'mesh': me.name, 'moebius': moebius, 'uv_map': uv_name,
             'shape_key': SHAPE_KEY, 'vertices': md.n_vertices, 'polygons': int(len(md.sizes)),
@@ -167,7 +103,10 @@ def sphere_object(context, obj, moebius='UNIFORM', bake=True, colormap=None):
             'baselines': core.get('baselines'), 'qc_mean': core.get('qc_mean'),
             'qc_max': core.get('qc_max'), 'flips': core.get('flips'),
             'flipped_faces': core.get('flipped_faces', [])[:100],
-            'pole_polygons': out['pole_polygons'], 'radius': out['radius'], 'centre': out['centre'],
+            'uv_flips': out['uv_flips'], 'u_scale': out['u_scale'],
+            'moebius_converged': core.get('moebius_converged'), 'warnings': warnings,
+            'pole_polygons': out['pole_polygons'], 'radius': out['radius'],
+            'centre': [float(x) for x in out['centre']],
             'baked': bool(bake), 'conformal_factor_range': list(rng) if rng else None,
             'seconds': {'map': round(t_map, 4), 'write': round(t_write, 4),
                         'total': round(time.perf_counter() - t0, 4)},
@@ -182,7 +121,8 @@ def summary_line(r):
              f"mu ratio {r['mu_ratio']:.4g}"]
     if r.get('baselines'):
         parts.append("baselines " + ", ".join(f"{k} {v:.3g}" for k, v in r['baselines'].items()))
-    parts += [f"{r['flips']} flips", f"qc mean {r['qc_mean']:.4f}", f"{r['seconds']['total']:.2f} s"]
+    parts += [f"{r['flips']} sphere flips", f"{r['uv_flips']} UV flips", f"qc mean {r['qc_mean']:.4f}",
+              f"{r['seconds']['total']:.2f} s"]
     return ', '.join(parts)
 
 
@@ -209,7 +149,9 @@ class UV_OT_conformal_sphere(bpy.types.Operator):
         except ConformalError as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
-        self.report({'INFO'}, summary_line(report))
+        for w in report['warnings']:
+            self.report({'WARNING'}, w)
+        self.report({'WARNING'} if report['warnings'] else {'INFO'}, summary_line(report))
         return {'FINISHED'}
 
 
@@ -233,7 +175,7 @@ def is_closed_mesh(obj):
     else:
         ce = np.empty(len(me.loops), np.int32)
         me.attributes['.corner_edge'].data.foreach_get('value', ce)
-        ans = bool((np.bincount(ce, minlength=len(me.edges)) == 2).all())
+        ans = every_edge_twice(ce, len(me.edges))
     if len(_closed_cache) > 64:
         _closed_cache.clear()
     _closed_cache[key] = ans
@@ -249,7 +191,8 @@ SPHERE_ROWS = [
     ("Mu ratio", 'mu_ratio'),
     ("Best baseline", lambda r: "-" if not r.get('baselines') else
         "{1:.4g} ({0})".format(*max(r['baselines'].items(), key=lambda kv: kv[1]))),
-    ("Flips", 'flips'),
+    ("Sphere flips", 'flips'),
+    ("UV flips", lambda r: "-" if r.get('uv_flips') is None else str(r['uv_flips'])),
     ("Qc mean", lambda r: "-" if r.get('qc_mean') is None else f"{r['qc_mean']:.4f}"),
     ("Time", lambda r: f"{r['seconds']['total']:.2f} s" if r.get('seconds') else "-"),
 ]
@@ -278,6 +221,8 @@ class _SpherePanel:
             box.label(text=f"Last: {report.get('moebius', '?').title()}, "
                            f"{report.get('triangles', 0):,} triangles")
             draw_report(box, report, SPHERE_ROWS)
+            for w in report.get('warnings') or []:
+                box.label(text=w, icon='ERROR')
 
 
 _registered = []

@@ -78,17 +78,39 @@ def test_sphere_operator_writes_everything(addon, bl):
     # baked mu
     assert me.attributes['conformal_factor'].domain == 'POINT'
     assert me.color_attributes.active_color_name == 'conformal_factor_color'
-    # spherical UVs: v is the latitude, each polygon is contiguous in u (split along the seam)
+    # spherical UVs: v is the latitude of the layout sphere (poles on vertices), all in [0,1], no UV
+    # triangle flipped, each polygon contiguous in u (split along the seam)
+    from conformal_flatten.core.sphere.layout import layout_sphere
+    from conformal_flatten.core.mesh.measures import signed_uv_areas
     W = loop_uv(me)
     cv = corner_verts(me)
-    lat = np.arcsin(np.clip(P[cv, 2], -1, 1))
-    np.testing.assert_allclose(W[:, 1], lat / np.pi + 0.5, atol=1e-5)
+    X, south = layout_sphere(P.astype(float))
+    lat = np.arcsin(np.clip(X[cv, 2], -1, 1))
+    np.testing.assert_allclose(W[:, 1], lat / np.pi + 0.5, atol=1e-4)
+    assert W.min() >= 0 and W.max() <= 1
+    assert rep['uv_flips'] == 0 and rep['pole_polygons'] == 0 and rep['warnings'] == []
+    assert (signed_uv_areas(W, np.arange(len(W)).reshape(-1, 3)) > 0).all()
     spread = np.ptp(W[:, 0].reshape(-1, 3), axis=1)
-    assert (spread < 0.25).sum() >= len(F) - rep['pole_polygons'] - 6   # only faces at the poles are wide
-    assert rep['pole_polygons'] <= 1
+    assert (spread < 0.25).all()
     crossing = (np.ptp(np.arctan2(P[F, 1], P[F, 0]), axis=1) > np.pi)
-    assert crossing.any() and (spread[crossing] < 0.25).mean() > 0.9    # seam faces fixed
-    assert W[:, 0].min() > -0.5 and W[:, 0].max() < 1.5
+    assert crossing.any()
+    # the seam: some edges have different UVs on their two sides, along a path near longitude 180
+    seam_u = W[:, 0][(np.abs(np.arctan2(P[cv, 1], P[cv, 0])) > 2.5)]
+    assert seam_u.min() < 0.1 and seam_u.max() > 0.9
+
+
+def test_folded_map_reports_warning(addon, bl):
+    """Cheburashka's needles fold a few triangles on the sphere: the operator says WARNING, lists the
+    warnings, and reports the sphere folds and the UV flips separately."""
+    import os
+    d = np.load(os.path.join(os.path.dirname(os.path.abspath(__file__)), 'data', 'sphere_cheburashka.npz'))
+    obj = bl.mesh_object('cheb', d['V'].astype(float), d['F'].astype(np.int64))
+    assert bpy.ops.uv.conformal_sphere(moebius='UNIFORM', bake=False) == {'FINISHED'}
+    rep = addon.addon.meshio.load_report(obj.data, 'conformal_sphere_report')
+    assert rep['flips'] > 0 and rep['warnings'] and 'folded' in rep['warnings'][0]
+    assert rep['uv_flips'] >= rep['flips'] - 1 and rep['moebius_converged'] is True
+    from conformal_flatten.addon.ops_sphere import summary_line
+    assert 'sphere flips' in summary_line(rep) and 'UV flips' in summary_line(rep)
 
 
 def test_existing_shape_keys_and_rerun(addon, bl):
@@ -104,7 +126,6 @@ def test_existing_shape_keys_and_rerun(addon, bl):
 
 def test_open_mesh_error_leaves_data(addon, bl):
     obj, V, F = closed_object(bl, freq=4)
-    me = obj.data
     # remove one triangle: an open mesh
     obj2 = bl.mesh_object('open', V, F[1:])
     before = bl.mesh_snapshot(obj2.data)
@@ -134,20 +155,26 @@ def test_torus_error(addon, bl):
     bl.assert_same(before, bl.mesh_snapshot(obj.data))
 
 
-def test_spherical_uv_seam_and_poles():
-    from conformal_flatten.addon.ops_sphere import spherical_uv, pole_rotation
-    from conformal_flatten.core.surfaces import icosphere
-    V, F = icosphere(4)
-    R = pole_rotation(V, 7)
-    S = V @ R.T
-    assert np.allclose(S[7], [0, 0, 1])
-    cv = F.ravel()
-    uv, encl = spherical_uv(S, cv, np.full(len(F), 3))
-    U = uv[:, 0].reshape(-1, 3)
-    assert encl <= 1
-    wide = np.ptp(U, axis=1) > 0.3
-    assert wide.sum() <= encl
-    # corners at the north pole take their polygon's mean u
-    pole = (F == 7)
-    others = U[pole.any(1)][~pole[pole.any(1)]].reshape(-1, 2).mean(1)
-    np.testing.assert_allclose(U[pole], others, atol=1e-12)
+def test_core_layout_has_no_bpy_math():
+    """Issue #11: the layout lives in the core; the operator module has no spherical_uv/pole_rotation."""
+    import conformal_flatten.addon.ops_sphere as ops
+    assert not hasattr(ops, 'spherical_uv') and not hasattr(ops, 'pole_rotation')
+
+
+def test_quad_cube_uvs_inside_unit_square_without_flips(addon, bl):
+    """Issue #12: a cube of 6 quads had u in [-0.30, 1.23] and 2 of 12 UV triangles flipped. Now every
+    UV lies in [0,1], no quad is flipped in UV, and the report counts UV flips apart from sphere folds."""
+    V = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    quads = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]])
+    c = V[quads].mean(1)
+    n = np.cross(V[quads[:, 1]] - V[quads[:, 0]], V[quads[:, 2]] - V[quads[:, 0]])
+    quads[(n * c).sum(1) < 0] = quads[(n * c).sum(1) < 0][:, ::-1]          # outward
+    obj = bl.mesh_object('cube', V, quads)
+    assert bpy.ops.uv.conformal_sphere(moebius='UNIFORM', bake=True) == {'FINISHED'}
+    rep = addon.addon.meshio.load_report(obj.data, 'conformal_sphere_report')
+    W = loop_uv(obj.data)
+    assert W.min() >= 0 and W.max() <= 1
+    assert rep['flips'] == 0 and rep['uv_flips'] == 0 and rep['triangles'] == 12
+    Q = W.reshape(-1, 4, 2)                                                   # shoelace area per quad
+    area = 0.5 * (Q[:, :, 0] * np.roll(Q[:, :, 1], -1, 1) - np.roll(Q[:, :, 0], -1, 1) * Q[:, :, 1]).sum(1)
+    assert (area > 0).all()

@@ -37,4 +37,6 @@ def run(args):
         print(line + f", {r['seconds']['total']:.2f} s")
         if r['flips']:
             print(f"flipped faces: {r['flipped_faces'][:50]}{' ...' if r['flips'] > 50 else ''}")
+        for w in r['warnings']:
+            print(f"WARNING: {w}")
     return 0

@@ -230,7 +230,8 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
         if left == 0 or buckets > 10000:
             break
         # the next contour must exist: jump over empty buckets
-        lo = min(float(np.min(np.where(c.valid & (T[k] > tau - W), T[k], np.inf))) for k, c in enumerate(charts))
+        lo = min(float(np.min(np.where(c.valid & (T[k] > tau - W), T[k], np.inf)))
+                 for k, c in enumerate(charts))
         if not np.isfinite(lo):
             raise ConformalError("the fast marching front stopped before covering the sphere: "
                                  "increase the grid size")

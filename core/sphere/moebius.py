@@ -26,14 +26,23 @@ accurate everywhere, not only near the start: a triangle's log scale after ``phi
 log scale plus the mean of ``log P(c, x_k)`` over its three vertices (exact for small triangles). The
 common ``log(1 - |c|^2)`` drops out of every ratio. On that surrogate it runs a log-sum-exp soft
 max - min with a continuation in the sharpness ``beta`` and analytic gradients (scipy BFGS) from
-several starts (the three baselines, and points towards the smallest-mu region), then re-linearises at
-the best exact result and finally polishes the exact max/min objective with Nelder-Mead. Every
-candidate is measured exactly, the best one wins, and the baselines are candidates, so ``uniform`` is
-never worse than the best baseline.
+several starts (the three baselines, and points towards the smallest-mu region). The best exact
+candidate is then refined to a local minimax optimum of the *exact* objective (``_polish``):
+trust-region sequential linear programming on the epigraph form (minimise ``hi - lo`` subject to
+``lo <= l_t <= hi``), the per-triangle log scales linearised by central differences in the three
+ball parameters and re-linearised after every accepted step, until the predicted gain or the trust
+radius vanishes (``converged`` in the info). Every candidate is measured exactly and the baselines are
+candidates, so ``uniform`` is never worse than the best baseline that folds nothing.
+
+Folds. Faces that the map folded stay out of the objective. A Moebius map keeps the orientation of
+small triangles but can turn a needle whose vertices lie near a great circle, so no candidate may fold
+a face that the map did not fold: the baselines and the soft results are rejected if they do, and the
+polish carries orientation constraints (``orientation >= ORIENT_MARGIN``) for the least well oriented
+faces, adding every face that a step would fold and solving the step again.
 """
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import minimize
+from scipy.optimize import linprog, minimize
 
 MOEBIUS_MODES = ('none', 'center', 'area', 'uniform')
 
@@ -205,7 +214,14 @@ def center_point(S, F, A):
 BETAS = (8.0, 32.0, 128.0, 512.0, 2048.0)
 AREA_SAMPLE = 40_000      # faces used by the mean-|log area| surrogate on larger meshes (every k-th face)
 CUBE_CELLS = 20           # the binned surrogate keeps the extreme faces of 6 * CUBE_CELLS^2 cells
-ACTIVE = 0.25             # log-scale band around the extremes used by the local polish
+ACTIVE = 0.25             # log-scale band around the extremes used by the local polish (times the spread)
+ACTIVE_CAP = 1500         # at most this many faces per side in the local polish
+FD_STEP = 1e-5            # central-difference step in q (hyperbolic distance)
+POLISH_RADIUS = 0.25      # trust radius of one polish step in q (hyperbolic distance)
+ORIENT_MARGIN = 1e-9      # smallest orientation a guarded face may reach in the polish
+GUARD_START = 64          # the least well oriented faces are guarded from the start
+POLISH_ITERS = 200        # at most this many linear programs in the local polish
+POLISH_RTOL = 1e-12       # predicted gain (log ratio) or trust radius below this: converged
 
 
 def _soft_descent(sur, q0, betas=BETAS, maxiter=40):
@@ -273,42 +289,132 @@ def _starts(sur, extra=(0.25, 0.5)):
     return [np.tanh(0.5 * t * spread) * x / nx for t in extra]
 
 
-def _polish(T, F, A, best_r, rounds=3, maxfev=150):
-    """Local minimax on the faces within ``ACTIVE`` of the extremes (the surrogate is exact at c=0
-    after re-linearising), Nelder-Mead on the hard max - min, accepted only if the exact ratio
-    improves. Returns (list of ball points applied, T, ratio, exact evaluations)."""
-    cs, evals = [], 0
-    for _ in range(rounds):
-        l = log_scale(T, F, A)
-        act = np.nonzero((l >= l.max() - ACTIVE) | (l <= l.min() + ACTIVE))[0]
-        if len(act) > 20000:
-            o = np.argsort(l)
-            act = np.r_[o[:10000], o[-10000:]]
-        sur = _Surrogate(T, F, A, faces=act)
-        step = 0.05
-        simplex = np.vstack([np.zeros(3), step * np.eye(3)])
-        res = minimize(sur.hard_range, np.zeros(3), method='Nelder-Mead',
-                       options=dict(maxfev=maxfev, initial_simplex=simplex, xatol=1e-6, fatol=1e-8))
-        c = _from_q(res.x)[0]
-        r = exact_ratio(T, F, A, c)
-        evals += 1
-        if r <= best_r * (1 + 1e-9):
+def flip_count(S: np.ndarray, F: np.ndarray, c: np.ndarray | None = None) -> int:
+    """Triangles ``F`` (m,3) whose flat image under ``phi_c(S)`` (``S`` (n,3) unit vectors; ``c`` None:
+    ``S`` itself) faces the centre. A Moebius map keeps small triangles' orientation but can turn a
+    needle whose vertices lie near a great circle."""
+    if c is not None and np.any(c):
+        S = ball_map(c, S)
+    P = S[F]
+    return int(((np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]) * P.mean(1)).sum(1) <= 0).sum())
+
+
+def _active(l, band, cap=ACTIVE_CAP):
+    """Faces (k,) within ``band`` of the largest or smallest ``l`` (m,), at most ``cap`` per side."""
+    o = np.argsort(l)
+    lo = o[:min(cap, int(np.searchsorted(l[o], l[o[0]] + band, side='right')))]
+    hi_n = min(cap, len(l) - int(np.searchsorted(l[o], l[o[-1]] - band, side='left')))
+    return np.unique(np.r_[lo, o[len(o) - hi_n:]])
+
+
+def orientation(S: np.ndarray, F: np.ndarray, c: np.ndarray | None = None) -> np.ndarray:
+    """Scale-free orientation of the flat triangles of ``phi_c(S)`` (``S`` (n,3) unit vectors, ``F``
+    (k,3)): ``det(a, b, c) / (|a - b| |b - c| |c - a|)`` (k,), positive when the image faces outwards;
+    about the distance of the three points from a great circle relative to the triangle's size."""
+    if c is not None and np.any(c):
+        S = ball_map(c, S)
+    P = S[F]
+    det = np.einsum('ij,ij->i', P[:, 0], np.cross(P[:, 1], P[:, 2]))
+    e = np.linalg.norm(P - P[:, [1, 2, 0]], axis=2).prod(1)
+    return det / np.maximum(e, np.finfo(float).tiny)
+
+
+def _slp_step(T, F, A, act, guard, rho):
+    """One linear program of the local minimax refinement (sequential linear programming), at the map
+    ``T`` (n,3) itself (c = 0): with ``l_t(q)`` the exact per-triangle log scales of ``phi_c(q)(T)`` on
+    the faces ``act`` (k,) and ``o_g(q)`` the orientations of the faces ``guard`` (g,), both linearised
+    by central differences, minimise ``hi - lo`` subject to ``lo <= l_t + J_t q <= hi``,
+    ``o_g + G_g q >= min(o_g, ORIENT_MARGIN)`` and ``|q_i| <= rho``. Returns (ball point c (3,),
+    predicted decrease of max l - min l on ``act``, whether the LP solver succeeded)."""
+    sel = np.r_[act, guard]
+    used, Fl = np.unique(F[sel], return_inverse=True)
+    Fl = Fl.reshape(-1, 3)
+    Tv = T[used]
+    na = len(act)
+    Fa, Fg, Aa = Fl[:na], Fl[na:], A[act]
+
+    def vals(q):
+        X = ball_map(_from_q(q)[0], Tv)
+        return np.r_[log_scale(X, Fa, Aa), orientation(X, Fg)]
+
+    v = vals(np.zeros(3))
+    J = np.empty((len(sel), 3))
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = FD_STEP
+        J[:, k] = (vals(e) - vals(-e)) / (2.0 * FD_STEP)
+    l, o, Jl, Jo = v[:na], v[na:], J[:na], J[na:]
+    g = len(o)
+    # variables (q0, q1, q2, hi, lo); rows: l + Jl q - hi <= 0, lo - l - Jl q <= 0, -Jo q <= o - margin
+    A_ub = np.zeros((2 * na + g, 5))
+    A_ub[:na, :3], A_ub[:na, 3] = Jl, -1.0
+    A_ub[na:2 * na, :3], A_ub[na:2 * na, 4] = -Jl, 1.0
+    A_ub[2 * na:, :3] = -Jo
+    b_ub = np.r_[-l, l, np.maximum(o - ORIENT_MARGIN, 0.0)]           # q = 0 is always feasible
+    res = linprog(np.array([0.0, 0.0, 0.0, 1.0, -1.0]), A_ub=A_ub, b_ub=b_ub,
+                  bounds=[(-rho, rho)] * 3 + [(None, None)] * 2, method='highs')
+    if res.status != 0:
+        return np.zeros(3), 0.0, False
+    return _from_q(res.x[:3])[0], float(l.max() - l.min() - res.fun), True
+
+
+def _polish(T, F, A, best_r, iters=POLISH_ITERS):
+    """Local minimax refinement of the exact objective on the map ``T`` (n,3) whose faces ``F`` are
+    all oriented: trust-region sequential linear programming (``_slp_step``), re-linearised at the
+    current map after every accepted step. Only faces within ``2 rho`` (plus a margin) of an extreme
+    take part (a face's log scale moves by at most |q| under ``phi_c(q)``). Faces that would fold join
+    the orientation guard and the step is solved again, so no triangle is ever folded. A step is
+    accepted if the exact ratio over all faces improves; the trust radius ``rho`` grows after a step
+    that achieves most of its predicted gain and shrinks after a rejected one. Converged: the
+    predicted gain (first-order optimality) or the trust radius falls below ``POLISH_RTOL``. Returns
+    (list of ball points applied, T, ratio, exact evaluations, converged, guarded faces)."""
+    cs, evals, converged = [], 0, False
+    rho = POLISH_RADIUS
+    guard = np.argsort(orientation(T, F))[:GUARD_START]
+    l = log_scale(T, F, A)
+    for _ in range(iters):
+        act = _active(l, 2.0 * np.sqrt(3.0) * rho + 1e-2)
+        c, pred, ok = _slp_step(T, F, A, act, guard, rho)
+        if not ok:
             break
+        if pred <= POLISH_RTOL * max(float(l.max() - l.min()), 1.0) or rho < POLISH_RTOL:
+            converged = True
+            break
+        bad = np.nonzero(orientation(T, F, c) <= 0)[0]
+        if len(bad):
+            guard = np.union1d(guard, bad)
+            continue
+        l_new = log_scale(_unit(ball_map(c, T)), F, A)
+        evals += 1
+        r = float(np.exp(l_new.min() - l_new.max()))
+        actual = np.log(r) - np.log(best_r)
+        if actual <= 0:
+            rho *= 0.25
+            continue
         cs.append(c)
         T = _unit(ball_map(c, T))
+        l = l_new
         best_r = r
-    return cs, T, best_r, evals
+        if actual > 0.75 * pred and np.abs(_to_q(c)).max() > 0.9 * rho:
+            rho = min(2.0 * rho, POLISH_RADIUS)
+        elif actual < 0.25 * pred:
+            rho *= 0.5
+    return cs, T, best_r, evals, converged, len(guard)
 
 
-def optimise(S, F, A, mode='uniform', progress=None, starts=3):
+def optimise(S: np.ndarray, F: np.ndarray, A: np.ndarray, mode: str = 'uniform', progress=None,
+             starts: int = 3) -> tuple:
     """Choose the Moebius transformation for sphere points ``S`` (n,3) (unit vectors) of the mesh
     faces ``F`` (m,3) with 3D areas ``A`` (m,). ``mode``: one of ``MOEBIUS_MODES``. ``starts``: how
     many of the candidate start points (baselines and points towards the smallest mu) run the full
     soft max-min continuation.
 
     Returns ``(S2 (n,3) transformed unit vectors, info dict)``; ``info`` has the ball point ``c``
-    (list of 3 floats; ``phi_c`` maps it to the centre), for ``uniform`` the realised ratio of every
-    baseline (``baselines``) and the number of exact objective evaluations."""
+    (list of 3 floats; ``phi_c`` maps it to the centre), and for ``uniform``: the realised ratio of
+    every baseline (``baselines``), the chosen ``ratio``, the number of exact objective
+    ``evaluations``, ``converged`` (the local minimax refinement reached first-order optimality),
+    ``guarded_faces`` (faces under an orientation constraint) and ``excluded_flipped`` (faces the map
+    folded, left out of the objective)."""
     report = progress or (lambda f, msg: None)
     S = _unit(np.asarray(S, np.float64))
     F = np.asarray(F, np.int64)
@@ -332,14 +438,19 @@ def optimise(S, F, A, mode='uniform', progress=None, starts=3):
     # faces the map folded stay folded under any Moebius map: leave them out of the objective
     P = S[F]
     flipped = (np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]) * P.mean(1)).sum(1) <= 0
-    if flipped.any() and not flipped.all():
+    if flipped.all():                        # nothing is oriented: no objective to optimise
+        info.update(c=[0.0, 0.0, 0.0], ratio=exact_ratio(S, F, A), evaluations=1, converged=False)
+        return S, info
+    if flipped.any():
         F, A = F[~flipped], A[~flipped]
         info['excluded_flipped'] = int(flipped.sum())
     report(0.0, 'Moebius baselines')
     base = {'none': np.zeros(3), 'center': center_point(S, F, A), 'area': area_point(S, F, A)}
     ratios = {k: exact_ratio(S, F, A, c) for k, c in base.items()}
     info['baselines'] = {k: round(v, 6) for k, v in ratios.items()}
-    best_name = max(ratios, key=ratios.get)
+    # a candidate that folds a triangle the map did not fold is never chosen
+    allowed = {k: flip_count(S, F, c) == 0 for k, c in base.items()}
+    best_name = max((k for k in ratios if allowed[k]), key=ratios.get)
     best_c, best_r = base[best_name], ratios[best_name]
     evals = len(base)
 
@@ -354,15 +465,17 @@ def optimise(S, F, A, mode='uniform', progress=None, starts=3):
         c = _from_q(_soft_descent(sur, q0))[0]
         r = exact_ratio(S, F, A, c)
         evals += 1
-        if r > best_r:
+        if r > best_r and flip_count(S, F, c) == 0:
             best_c, best_r, best_name = c, r, 'soft'
 
     # re-linearise at the best point and polish the exact objective locally
     report(0.75, 'polishing the exact min/max')
     T = _unit(ball_map(best_c, S)) if np.any(best_c) else S
-    cs, T, best_r, ev = _polish(T, F, A, best_r)
+    cs, T, best_r, ev, converged, guarded = _polish(T, F, A, best_r)
     evals += ev
     info['c'] = compose_point([best_c] + cs).tolist()
     info['ratio'] = best_r
     info['evaluations'] = int(evals)
+    info['converged'] = bool(converged)
+    info['guarded_faces'] = int(guarded)
     return T, info
