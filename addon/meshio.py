@@ -242,24 +242,6 @@ def bake_scalar(me, name, values, colormap_name='PERCEPTUAL', log=True, centre=N
     return lo, hi
 
 
-# --- per-face to per-vertex ----------------------------------------------------------------------
-def face_to_vertex(F, values, weights, n, power=1.0):
-    """Deprecated, kept only for ``ops_sphere`` until it switches to ``core.mesh.measures.vertex_mu``
-    (the one per-vertex mu, an area-weighted geometric mean); nothing else in the add-on may use it.
-    Weighted mean at each of the ``n`` vertices of per-triangle ``values`` (m,) over the triangles
-    ``F`` (m,3) around it, with ``weights`` (m,) (e.g. areas). With ``power`` p it averages v**p and
-    returns the p-th root (p = 2 for conformal factors: the vertex value is then sqrt(UV area / 3D area)
-    of the vertex's star). Vertices in no triangle get NaN."""
-    F = np.asarray(F)
-    w = np.repeat(np.asarray(weights, float), 3)
-    v = np.repeat(np.asarray(values, float) ** power, 3)
-    num = np.bincount(F.ravel(), w * v, minlength=n)
-    den = np.bincount(F.ravel(), w, minlength=n)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        out = num / den
-    return out ** (1.0 / power)
-
-
 # --- reports -------------------------------------------------------------------------------------
 def store_report(idblock, key, report):
     """Store a JSON-serialisable dict as a JSON string custom property ``key`` of an ID (mesh/object),

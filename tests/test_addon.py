@@ -496,8 +496,7 @@ def test_no_import_cycle_in_addon_or_core():
 def test_addon_files_small_and_free_of_math_and_topology():
     """Every add-on file is under 450 lines; the add-on's own files import no topology or measure code
     from the core and call no numpy math (areas, means, roots, logs, Jacobians): all of that is in
-    ``core.unwrap``. Exceptions: colour mapping (colormap.py) and ``meshio.face_to_vertex``, kept only
-    for ops_sphere.py."""
+    ``core.unwrap``. Exception: colour mapping (colormap.py)."""
     import ast
     forbidden_np = {'sqrt', 'cross', 'bincount', 'log', 'exp', 'einsum', 'mean', 'linalg', 'arccos',
                     'arctan2', 'hypot', 'dot'}
@@ -516,7 +515,7 @@ def test_addon_files_small_and_free_of_math_and_topology():
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and node.module and node.level:
                 assert not any(k in node.module for k in forbidden_core), (f, node.module)
-            if isinstance(node, ast.FunctionDef) and (f, node.name) != ('meshio.py', 'face_to_vertex'):
+            if isinstance(node, ast.FunctionDef):
                 for sub in ast.walk(node):
                     if isinstance(sub, ast.Attribute) and isinstance(sub.value, ast.Name) and \
                             sub.value.id == 'np':

@@ -16,6 +16,7 @@ import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PY = '{}.{}'.format(*sys.version_info[:2])
+VERSION = tomllib.load(open(os.path.join(ROOT, 'blender_manifest.toml'), 'rb'))['version']
 CP = 'cp' + PY.replace('.', '')
 # Blender runs Python 3.11 from 4.2 to 5.0 and Python 3.13 from 5.1 (max is exclusive)
 RANGES = {'3.11': ('4.2.0', '5.1.0'), '3.13': ('5.1.0', '5.3.0')}
@@ -28,7 +29,7 @@ def built_zip(tmp_path_factory):
     built = package.build(str(tmp / 'dist'), wheels=True, stage_dir=str(tmp / 'stage'), pythons=[PY],
                           platforms=['linux-x64'], log=lambda *a: None)
     assert [(os.path.basename(z), py, plat) for z, py, plat in built] == \
-        [(f'conformal_flatten-0.1.0-{CP}-linux_x64.zip', PY, 'linux-x64')]
+        [(f'conformal_flatten-{VERSION}-{CP}-linux_x64.zip', PY, 'linux-x64')]
     return built[0][0]
 
 
@@ -68,7 +69,7 @@ def test_every_python_line_without_wheels(tmp_path):
                           log=lambda *a: None)
     got = {}
     for path, py, plat in built:
-        assert plat is None and os.path.basename(path) == f"conformal_flatten-0.1.0-cp{py.replace('.', '')}.zip"
+        assert plat is None and os.path.basename(path) == f"conformal_flatten-{VERSION}-cp{py.replace('.', '')}.zip"
         with zipfile.ZipFile(path) as z:
             m = tomllib.loads(z.read('blender_manifest.toml').decode())
         assert 'wheels' not in m and 'platforms' not in m
