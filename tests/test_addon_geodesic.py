@@ -195,3 +195,33 @@ def test_panel_draws_button_and_report(addon, bl):
     assert "Max distance" in labels and "Solver" in labels and "skfmm" in labels
     from conformal_flatten.addon import ui
     assert ui.geodesic_solver_label() == 'scikit-fmm'
+
+
+def test_solver_is_kept_for_a_second_source(addon, bl, monkeypatch):
+    """A second run on the unchanged mesh with another source neither flattens nor rasterises."""
+    import conformal_flatten.core.disk.flatten as flatten_module
+    from conformal_flatten.core.geodesic import solver as gsol
+    calls = {'flatten': 0, 'rasterise': 0}
+    real_flatten, real_rasterise = flatten_module.flatten, gsol.Grid.rasterise
+
+    def counting_flatten(*a, **k):
+        calls['flatten'] += 1
+        return real_flatten(*a, **k)
+
+    def counting_rasterise(self, *a, **k):
+        calls['rasterise'] += 1
+        return real_rasterise(self, *a, **k)
+
+    monkeypatch.setattr(flatten_module, 'flatten', counting_flatten)
+    monkeypatch.setattr(gsol.Grid, 'rasterise', counting_rasterise)
+    obj, V, F = bump_object(bl)
+    me = obj.data
+    for k in (40, 700):
+        bpy.context.scene.cursor.location = tuple(V[k])
+        assert bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA',
+                                                        source='CURSOR') == {'FINISHED'}
+        d = point_attr(me, 'geodesic_distance')
+        assert int(np.argmin(d)) == k
+    assert calls == {'flatten': 1, 'rasterise': 1}
+    assert report_of(me)['flattening'] == 'geodesic cache'
+    assert '.conformal_geodesic_uv' not in me.attributes          # a solver is kept, not a UV map

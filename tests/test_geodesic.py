@@ -1,4 +1,5 @@
-"""Geodesic distance by fast marching on the conformal plane (core.geodesic.solver, core.geodesic.eikonal, CLI).
+"""Geodesic distance by fast marching on the conformal plane (core.geodesic.solver, core.geodesic.eikonal,
+CLI).
 
 Exact references: tests/data/geodesic_ref_*.npz (pygeodesic exact MMP, bench/make_refdata.py)."""
 import os
@@ -286,3 +287,36 @@ def test_loose_vertex_gets_nan_and_does_not_shift_the_grid(flat):
     d0, rep0 = geo.geodesic_distance(V, F, [2112], uv=uv, grid=512)
     assert rep['grid'] == rep0['grid']
     np.testing.assert_allclose(d[:-1], d0, rtol=1e-12, atol=1e-12)
+
+
+# ------------------------------------------------------------------------------------------------
+# GeodesicSolver: the per-mesh work is done once
+def test_solver_answers_a_second_source_without_reflattening(monkeypatch):
+    import core.disk.flatten as flatten_module
+    calls = {'flatten': 0, 'rasterise': 0}
+    real_flatten, real_rasterise = flatten_module.flatten, geo.Grid.rasterise
+
+    def counting_flatten(*a, **k):
+        calls['flatten'] += 1
+        return real_flatten(*a, **k)
+
+    def counting_rasterise(self, *a, **k):
+        calls['rasterise'] += 1
+        return real_rasterise(self, *a, **k)
+
+    monkeypatch.setattr(flatten_module, 'flatten', counting_flatten)
+    monkeypatch.setattr(geo.Grid, 'rasterise', counting_rasterise)
+    V, F = make_surface('bump', 33)
+    gs = geo.GeodesicSolver(V, F, boundary='area', grid=256)
+    assert calls == {'flatten': 1, 'rasterise': 1}
+    d0, r0 = gs.distance([0])
+    d1, r1 = gs.distance([544])
+    d2, _ = gs.distance(points=([100], [[0.2, 0.3, 0.5]]))
+    assert calls == {'flatten': 1, 'rasterise': 1}
+    assert d0[0] == pytest.approx(0, abs=1e-12) and d1[544] == pytest.approx(0, abs=1e-12)
+    assert int(np.argmin(d1)) == 544 and d1[0] == pytest.approx(d0[544], rel=2e-3)   # symmetry
+    assert np.isfinite(d2).all() and 'flatten' in r0['seconds']
+    # the one-shot wrapper gives the same numbers (and flattens once more)
+    ref, _ = geo.geodesic_distance(V, F, [544], boundary='area', grid=256)
+    np.testing.assert_allclose(d1, ref, rtol=1e-12, atol=1e-12)
+    assert calls == {'flatten': 2, 'rasterise': 2}
