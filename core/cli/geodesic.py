@@ -2,11 +2,11 @@
 
 Writes one geodesic distance per vertex (input vertex order, mesh units, ``%.9g``) to the nearest of
 the source vertices (0-based indices into the OBJ's ``v`` lines); ``inf`` on parts without a source,
-``nan`` for vertices in no face. Warnings (estimated error above the target, parts not reached) go to
-stderr, or into the JSON report's ``warnings``. The file is written only when the
+``nan`` for vertices in no face. Warnings (estimated error above the target, parts not reached) are printed
+as ``warning:`` lines after the summary (stdout; stderr is kept for the one error line), or go into the
+JSON report's ``warnings``. The file is written only when the
 whole computation succeeded."""
 import json
-import sys
 
 import numpy as np
 
@@ -50,5 +50,5 @@ def run(args):
               f"solver {report['solver']}, estimated mean error {100 * report['error_estimate']:.2g}%, "
               f"{report['seconds']['total']:.2f} s")
         for w in report['warnings']:
-            print(f"warning: {w}", file=sys.stderr)
+            print(f"warning: {w}")
     return 0

@@ -245,12 +245,13 @@ def default_grid(V, F, uv):
 
 
 
-def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None):
+def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None):
     """Flat-chart times (``_chart_time``, ``inv_mu`` the grid field 1/mu) from the sources ``S`` (k,2,
     node coordinates). With ``pts`` None:
     on the grid, over a window of ``radius_nodes + 2`` around each source, returns (ny, nx) with inf
     outside the windows. With ``pts`` (q,2 node coordinates): at those points (q,), from the nearest
-    source in node units only (others inf)."""
+    source in node units only (others inf). ``domain`` (ny, nx) bool: the inside nodes; segments that
+    leave them give inf (``_visible``)."""
     h = grid.h
     if pts is None:
         w = int(np.ceil(radius_nodes)) + 2
@@ -271,7 +272,7 @@ def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None):
             keep = valid[ii, jj]
             ii, jj, src = ii[keep], jj[keep], src[keep]
             P = np.stack([jj, ii], 1).astype(np.float64)
-            np.minimum.at(out, (ii, jj), _chart_time(inv_mu, valid, Sb[src], P, h))
+            np.minimum.at(out, (ii, jj), _chart_time(inv_mu, valid, Sb[src], P, h, domain))
         return out
     # at arbitrary points: nearest sources by a KD-tree
     from scipy.spatial import cKDTree
@@ -279,17 +280,43 @@ def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None):
     T = np.full(len(pts), np.inf)
     near = d <= radius_nodes + 1
     if near.any():
-        T[near] = _chart_time(inv_mu, valid, S[k[near]], pts[near], h)
+        T[near] = _chart_time(inv_mu, valid, S[k[near]], pts[near], h, domain)
     return T
 
 
-def _chart_time(inv_mu, valid, S, P, h):
+def _chart_time(inv_mu, valid, S, P, h, inside=None):
     """Flat-chart time from ``S`` (k,2) to ``P`` (k,2) (node coordinates): ``|P - S| h`` times the
-    mean of ``1/mu`` along the segment (Simpson's rule on the grid field ``inv_mu`` = 1/mu)."""
+    mean of ``1/mu`` along the segment (Simpson's rule on the grid field ``inv_mu`` = 1/mu). With
+    ``inside`` (ny, nx) bool: inf where the segment leaves the domain (``_visible``), since a straight
+    line across a gap of the domain is no path on the surface."""
     d = np.linalg.norm(P - S, axis=1) * h
     inv = (bilinear(inv_mu, S, valid) + 4 * bilinear(inv_mu, 0.5 * (S + P), valid)
            + bilinear(inv_mu, P, valid)) / 6.0
-    return d * inv
+    T = d * inv
+    if inside is not None:
+        T = np.where(_visible(inside, S, P), T, np.inf)
+    return T
+
+
+def _visible(inside, S, P, skip=0.6, chunk=200_000):
+    """(k,) bool: the segments ``S`` -> ``P`` (k,2 node coordinates) stay on inside nodes: samples every
+    half cell, each at its nearest node, must be ``inside`` (ny, nx), except within ``skip`` cells of
+    either end (an end on the boundary may round to a node just outside)."""
+    ny, nx = inside.shape
+    out = np.ones(len(S), bool)
+    L = np.linalg.norm(P - S, axis=1)
+    if not len(S) or L.max() <= 2 * skip:
+        return out
+    t = np.linspace(0.0, 1.0, int(np.ceil(L.max() / 0.25)) + 1)[1:-1]
+    for a in range(0, len(S), max(1, chunk // max(len(t), 1))):
+        b = a + max(1, chunk // max(len(t), 1))
+        s_, p_, l_ = S[a:b], P[a:b], L[a:b]
+        Q = s_[:, None, :] + t[None, :, None] * (p_ - s_)[:, None, :]          # (c, K, 2)
+        check = (t[None, :] * l_[:, None] > skip) & ((1 - t[None, :]) * l_[:, None] > skip)
+        j = np.clip(np.rint(Q[..., 0]).astype(np.int64), 0, nx - 1)
+        i = np.clip(np.rint(Q[..., 1]).astype(np.int64), 0, ny - 1)
+        out[a:b] = ~(check & ~inside[i, j]).any(1)
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -404,6 +431,60 @@ def seed_radius(mu, valid, h, source_radius):
     return float(max(3.0, min(source_radius, cap)))
 
 
+def bridging_rim(G, F, valid):
+    """(ny, nx) bool: the rim nodes (valid, not inside) that link across a gap of the domain: a
+    4-neighbour in use whose triangle shares no vertex with the rim node's own (the triangle it was
+    extended from). Where cells are larger than triangles this also flags some harmless rim nodes;
+    they are then only extrapolated, not marched through. ``G`` a rasterised ``Grid`` with its rim,
+    ``F`` (m,3) the chart's triangles, ``valid`` (ny, nx) the nodes in use."""
+    face = G.face
+    rim = valid & ~G.inside
+    ii, jj = np.nonzero(rim)
+    ny, nx = face.shape
+    bad = np.zeros(len(ii), bool)
+    own = F[face[ii, jj]]                                       # (r,3)
+    for di, dj in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        a, b = ii + di, jj + dj
+        ok = (a >= 0) & (a < ny) & (b >= 0) & (b < nx)
+        a, b = np.where(ok, a, 0), np.where(ok, b, 0)
+        nb_face = face[a, b]
+        use = ok & valid[a, b] & (nb_face >= 0)
+        other = F[np.where(use, nb_face, 0)]
+        share = (own[:, :, None] == other[:, None, :]).any((1, 2))
+        bad |= use & ~share
+    out = np.zeros(face.shape, bool)
+    out[ii[bad], jj[bad]] = True
+    return out
+
+
+def extrapolate_rim(T, inside, rim, h, inv_mu):
+    """Travel times at the rim nodes (outside the domain, next to it) from the inside ones, for
+    sampling boundary vertices: per axis direction with two inside nodes ``2 T1 - T2`` (linear
+    extrapolation, second order), averaged over the directions that have them; else the nearest
+    inside neighbour plus one cell ``T1 + h / mu``. ``T`` (ny, nx) with finite values inside,
+    ``inside``, ``rim`` (ny, nx) bool, ``inv_mu`` (ny, nx) = 1/mu. Returns (ny, nx): ``T`` with the
+    rim filled (inf where no inside neighbour)."""
+    ny, nx = T.shape
+    Tin = np.where(inside, T, np.inf)
+    pad = np.pad(Tin, 2, constant_values=np.inf)
+    ii, jj = np.nonzero(rim)
+    lin_sum = np.zeros(len(ii))
+    lin_cnt = np.zeros(len(ii))
+    step = np.full(len(ii), np.inf)
+    for di, dj in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        t1 = pad[ii + 2 + di, jj + 2 + dj]
+        t2 = pad[ii + 2 + 2 * di, jj + 2 + 2 * dj]
+        both = np.isfinite(t1) & np.isfinite(t2)
+        lin_sum += np.where(both, 2 * np.where(both, t1, 0) - np.where(both, t2, 0), 0.0)
+        lin_cnt += both
+        step = np.minimum(step, t1 + h * inv_mu[ii, jj])
+    out = T.copy()
+    with np.errstate(invalid='ignore', divide='ignore'):
+        lin = np.where(lin_cnt > 0, lin_sum / np.maximum(lin_cnt, 1), np.inf)
+    out[ii, jj] = np.where(lin_cnt > 0, np.minimum(lin, step), step)
+    return out
+
+
 # compatibility name: core/metric.py and core/sphere/geodesic.py import ``march`` (docs/geodesic.md)
 march = eikonal_march
 
@@ -418,32 +499,40 @@ def _groups(mu_s):
 
 # --------------------------------------------------------------------------------------------------
 # accuracy model: error estimate from the local resolution, and the grid size for an error target
-# Calibrated against exact polyhedral distances (MMP) on the test surfaces and the public meshes:
-# bench/geodesic_real.py --calibrate, docs/geodesic.md "Error estimate".
-ERR_GRID_C, ERR_GRID_P = 1.0, 2.0       # mean rel. error ~ C * (cell in surface units / chart size)^P
-ERR_QC = 0.0                            # plus ERR_QC * (area-weighted mean qc - 1)
+# Calibrated against exact polyhedral distances (MMP) and exact corridor distances: see docs/geodesic.md
+# "Error estimate" and bench/geodesic_real.py --calibrate. The dominant term is first order in the grid
+# cell: fast marching cuts corners where geodesics bend round reflex boundary corners (measured
+# C = 0.03-0.06 on a corridor, 0.1-0.27 on the woody outline); 0.3 keeps the estimate conservative.
+ERR_GRID_C = 0.3       # mean rel. error ~ C * (mean grid cell in surface units) / (median distance)
+ERR_QC = 0.02          # plus ERR_QC * (area-weighted mean qc - 1): the map is only nearly conformal
+TYPICAL_DISTANCE = 0.35  # before a query, the median distance is taken as this times the 3D bbox diagonal
 
 
-def resolution(mu_face: np.ndarray, area: np.ndarray, h: float) -> float:
-    """Relative surface resolution of a grid of spacing ``h`` (UV units): the ``ERR_GRID_P``-mean over
-    the surface (area-weighted, ``area`` (m,)) of the grid cell in surface units ``h / mu_T`` (``mu_face``
-    (m,), UV units per surface unit), divided by the chart's size ``sqrt(total area)``. Dimensionless."""
-    w = area / area.sum()
-    cell = (w * (h / mu_face) ** ERR_GRID_P).sum() ** (1.0 / ERR_GRID_P)
-    return float(cell / np.sqrt(area.sum()))
+def surface_cell(mu_face: np.ndarray, area: np.ndarray, h: float) -> float:
+    """The grid's mean cell size in surface units (mesh units): the area-weighted (``area`` (m,)) mean
+    over the triangles of ``h / mu_T`` for a grid spacing ``h`` (UV units) and the realised scale
+    ``mu_face`` (m,) (UV units per surface unit)."""
+    return float((area * (h / mu_face)).sum() / area.sum())
 
 
-def error_estimate(rel_cell: float, qc_mean: float) -> float:
-    """Estimated mean relative error of the distances (dimensionless) on a chart whose relative
-    surface resolution is ``rel_cell`` (``resolution``) and whose map has area-weighted mean
-    quasi-conformality ``qc_mean`` (>= 1)."""
-    return float(ERR_GRID_C * rel_cell ** ERR_GRID_P + ERR_QC * max(qc_mean - 1.0, 0.0))
+def error_estimate(cell: float, distance: float, qc_mean: float) -> float:
+    """Estimated mean relative error (dimensionless) of the distances on a chart whose mean surface
+    cell is ``cell`` (``surface_cell``), for a query whose median distance is ``distance`` (mesh
+    units), on a map of area-weighted mean quasi-conformality ``qc_mean`` (>= 1)."""
+    return float(ERR_GRID_C * cell / max(distance, 1e-300) + ERR_QC * max(qc_mean - 1.0, 0.0))
+
+
+def typical_distance(V: np.ndarray) -> float:
+    """The median distance assumed before a query (mesh units): ``TYPICAL_DISTANCE`` times the
+    diagonal of the bounding box of the points ``V`` (k,3)."""
+    return float(TYPICAL_DISTANCE * np.linalg.norm(np.ptp(V, axis=0)))
 
 
 def default_grid_for_target(V, F, uv, mu_face, qc_mean, target=ERROR_TARGET, pad=2):
-    """Automatic grid size (nodes along the longer UV side) for one chart: the smallest multiple of 64
-    whose ``error_estimate`` meets ``target``, at least ``default_grid`` (8 nodes per mean UV edge)
-    and ``GRID_AUTO_MIN``, at most ``GRID_AUTO_MAX``. Returns (grid, reachable): ``reachable`` is False
+    """Automatic grid size (nodes along the longer UV side) for one chart, ``V`` (k,3), ``F`` (mi,3),
+    ``uv`` (k,2), ``mu_face`` (mi,): the smallest multiple of 64 whose ``error_estimate`` (at the
+    ``typical_distance``) meets ``target``, at least ``default_grid`` (8 nodes per mean UV edge) and
+    ``GRID_AUTO_MIN``, at most ``GRID_AUTO_MAX``. Returns (grid, reachable): ``reachable`` is False
     when the cap (or the map's distortion alone) keeps the estimate above the target."""
     area = face_areas(V, F)
     ext = float(np.ptp(uv[np.unique(F)], axis=0).max())
@@ -451,9 +540,9 @@ def default_grid_for_target(V, F, uv, mu_face, qc_mean, target=ERROR_TARGET, pad
     room = target - ERR_QC * max(qc_mean - 1.0, 0.0)
     if room <= 0:
         return GRID_AUTO_MAX, False
-    r_need = (room / ERR_GRID_C) ** (1.0 / ERR_GRID_P)
-    r_unit = resolution(mu_face, area, ext)               # rel_cell = r_unit / (grid - 1 - 2 pad)
-    g = 1 + 2 * pad + r_unit / r_need
+    # cell(grid) = cell_unit / (grid - 1 - 2 pad), as the Grid's spacing
+    cell_unit = surface_cell(mu_face, area, ext)
+    g = 1 + 2 * pad + ERR_GRID_C * cell_unit / (room * typical_distance(V))
     g = int(64 * np.ceil(max(g, base) / 64))
     if g > GRID_AUTO_MAX:
         return GRID_AUTO_MAX, False
@@ -469,8 +558,10 @@ class Chart:
     ``V`` (k,3) their positions; ``F`` (mi,3) the island's triangles in local indices; ``faces`` (mi,)
     their indices in the input ``F``; ``uv`` (k,2) the map, rotated to its smallest bounding
     rectangle; ``mu_face`` (mi,) realised per-triangle scale; ``grid`` (``Grid``) with ``mu``,
-    ``inv_mu`` and ``valid`` (ny, nx); ``P`` (k,2) node coordinates of the vertices; ``error_estimate``
-    (mean relative, dimensionless) and ``reachable`` (False when the automatic grid hit its cap)."""
+    ``inv_mu`` and ``valid`` (ny, nx); ``P`` (k,2) node coordinates of the vertices; ``cell`` the mean
+    grid cell in surface units; ``error_estimate`` (mean relative, dimensionless, at the typical
+    distance; a query re-estimates it from its own distances) and ``reachable`` (False when the
+    automatic grid hit its cap)."""
 
     def __init__(self, V, F, uv, verts, faces, grid, mu_mode, target):
         self.verts, self.faces, self.V, self.F = verts, faces, V, F
@@ -489,12 +580,13 @@ class Chart:
         else:
             mu = G.interpolate(uv, F, face_values=mu_f)
         self.mu = np.where(valid, np.clip(mu, mu_f.min(), mu_f.max()), 1.0)
+        self.march_on = valid & ~bridging_rim(G, F, valid)
         self.inv_mu = 1.0 / self.mu
         self.grid = G
         self.size = int(grid)
         self.P = G.coords(uv)
-        self.rel_cell = resolution(mu_f, self.area, G.h)
-        self.error_estimate = error_estimate(self.rel_cell, self.qc_mean)
+        self.cell = surface_cell(mu_f, self.area, G.h)
+        self.error_estimate = error_estimate(self.cell, typical_distance(V), self.qc_mean)
 
     def node_points(self, ii, jj):
         """3D positions (q,3) of grid nodes (``ii``, ``jj``) (q,), each in the plane of its triangle
@@ -653,22 +745,19 @@ class GeodesicSolver:
         seconds['rasterise'] = time.perf_counter() - t
         self.report = report
         self.seconds = seconds
-        self.warnings = self._setup_warnings()
 
     # ----------------------------------------------------------------------------------------------
-    def _setup_warnings(self):
-        out = []
-        worst = max(self.charts, key=lambda c: c.error_estimate)
-        if worst.error_estimate > self.error_target:
-            where = (f" on island {self.charts.index(worst) + 1} of {len(self.charts)}"
-                     if len(self.charts) > 1 else "")
-            msg = (f"estimated mean error {100 * worst.error_estimate:.3g}%{where} is above the target "
-                   f"{100 * self.error_target:.3g}% (grid {worst.size}")
-            if not worst.reachable:
-                msg += f", the automatic grid is capped at {GRID_AUTO_MAX}"
-            msg += "): use a larger grid, or a more uniform map (boundary 'uniform')"
-            out.append(msg)
-        return out
+    def _warning(self, chart, est):
+        """The warning for ``chart`` (index) whose estimate ``est`` is above the target, or None."""
+        if est <= self.error_target:
+            return None
+        ch = self.charts[chart]
+        where = f" on island {chart + 1} of {len(self.charts)}" if len(self.charts) > 1 else ""
+        msg = (f"estimated mean error {100 * est:.3g}%{where} is above the target "
+               f"{100 * self.error_target:.3g}% (grid {ch.size}")
+        if not ch.reachable:
+            msg += f", the automatic grid is capped at {GRID_AUTO_MAX}"
+        return msg + "): use a larger grid, or a more uniform map (boundary 'uniform')"
 
     def _upper_bound(self, src_split, pf, pb):
         """Shortest edge-path lengths (N,) on the cut surface from the split source vertices and the
@@ -704,7 +793,8 @@ class GeodesicSolver:
         islands without a source. ``report``: grid [ny, nx] (the largest chart), cell (UV units),
         masked_fraction, solver, sources, seed_radius (cells), marches, islands, islands_reached,
         error_estimate (mean relative, dimensionless), error_target, clamped {below_euclid,
-        above_edges} (vertex counts), warnings (list of str), seconds {rasterise, solve, sample,
+        above_edges} (vertex counts), filled_from_edges (vertices no grid node reached, given edge
+        paths from their neighbours), warnings (list of str), seconds {rasterise, solve, sample,
         total} and, for the set-up, flatten. Raises ``ConformalError``."""
         say = progress or (lambda f, msg: None)
         t0 = time.perf_counter()
@@ -741,6 +831,7 @@ class GeodesicSolver:
             radii.append(r)
             reached += 1
         t = time.perf_counter()
+        filled = self._fill_unreached(dist_s, active)
         clamped = {'below_euclid': 0, 'above_edges': 0}
         if clamp:
             E, _ = tree.query(self.Vs)
@@ -756,8 +847,18 @@ class GeodesicSolver:
         t_sample = time.perf_counter() - t
         G = max((self.charts[c] for c in active), key=lambda ch: ch.size)
         ny, nx = G.grid.shape
-        est = max(self.charts[c].error_estimate for c in active)
-        warnings = list(self.warnings)
+        # the error estimate of each reached chart, at the median distance of this query
+        ests = []
+        for c in active:
+            ch = self.charts[c]
+            dc = dist_s[ch.verts]
+            dc = dc[np.isfinite(dc) & (dc > 0)]
+            ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.qc_mean))
+        est = max(ests)
+        warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w]
+        if filled:
+            warnings.append(f"{filled} vertices lie in UV slivers thinner than a grid cell: their distances "
+                            "are edge paths from their neighbours (an upper bound); use a larger grid")
         if len(active) < len(self.charts):
             warnings.append(f"{len(self.charts) - len(active)} of {len(self.charts)} islands have no source: "
                             "their distances are infinite (distances do not cross between islands)")
@@ -770,7 +871,7 @@ class GeodesicSolver:
             'grid': [ny, nx], 'cell': G.grid.h, 'masked_fraction': float(1 - G.grid.inside.mean()),
             'solver': self.solver, 'sources': int(len(X_src)), 'seed_radius': float(min(radii)),
             'marches': marches, 'islands': len(self.charts), 'islands_reached': reached,
-            'error_estimate': est, 'clamped': clamped, 'warnings': warnings,
+            'error_estimate': est, 'clamped': clamped, 'filled_from_edges': filled, 'warnings': warnings,
             'seconds': {k: round(v, 4) for k, v in seconds.items()},
         })
         return dist, report
@@ -780,6 +881,9 @@ class GeodesicSolver:
         positions (vertex sources ``loc`` (a,) local indices first, then the surface points in local
         faces ``src_faces`` (b,)). Returns (dist (k,), seed radius in cells, number of marches)."""
         G, mu, valid, inv_mu = ch.grid, ch.mu, ch.valid, ch.inv_mu
+        inside = G.inside
+        march_on = ch.march_on                      # inside nodes and the rim nodes that bridge no gap
+        rim = valid & ~march_on
         S = G.coords(S_uv)
         mu_s = bilinear(mu, S, valid)
         if not np.isfinite(mu_s).all():
@@ -794,7 +898,7 @@ class GeodesicSolver:
         for idx in groups:
             tau = radius * G.h / float(mu_s[idx].min())
             reach = radius * float(mu_s[idx].max() / mu_s[idx].min())
-            Tloc = _local_times(G, inv_mu, valid, S[idx], reach)
+            Tloc = _local_times(G, inv_mu, valid, S[idx], reach, domain=march_on)
             Tloc = self._exact_seed(ch, Tloc, tree, X_src, upper, src_local, src_faces)
             h_far = 4.0 * G.h
             phi = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * mu, h_far)
@@ -804,19 +908,45 @@ class GeodesicSolver:
                 raise ConformalError("the source seed covers no grid node", 'degenerate', 'larger_grid')
             if calibrate:
                 phi = calibrate_phi(phi, valid, G.h)
-            Tm, used = eikonal_march(Tloc, seed, phi, mu, ~valid, G.h, self.solver)
-            Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else Tm
+            # march without the rim nodes that bridge gaps of the domain (the front would jump between
+            # parts that are far apart on the surface); those get extrapolated values for sampling
+            Tm, used = eikonal_march(Tloc, seed & march_on, phi, mu, ~march_on, G.h, self.solver)
+            Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else np.where(seed, Tloc, Tm)
+            if rim.any():
+                Tg = np.where(rim & ~seed, extrapolate_rim(Tg, march_on, rim, G.h, inv_mu), Tg)
             np.minimum(T, Tg, out=T)
-            nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=ch.P)
+            nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=ch.P, domain=march_on)
             near = np.where(nv <= tau, np.fmin(near, nv), near)
         T[~valid] = np.inf
         dist = bilinear(np.where(valid, T, np.nan), ch.P, valid)
         dist = np.fmin(dist, near)
-        bad = int((~np.isfinite(dist)).sum())
-        if bad:
-            raise ConformalError(f"{bad} vertices were not reached by the front: the UV domain is not "
-                                 "connected at this grid size", 'not_reached', 'larger_grid')
         return dist, radius, len(groups)
+
+    def _fill_unreached(self, dist_s, charts):
+        """Vertices of the ``charts`` (indices) that no grid node reached (UV slivers thinner than a
+        cell) get the shortest path through the edges from the reached ones: a Dijkstra run from a
+        virtual node joined to every reached vertex by an edge of its distance. ``dist_s`` (N,) is
+        changed in place; returns the number of vertices filled."""
+        import scipy.sparse as sp
+        from scipy.sparse.csgraph import dijkstra
+        verts = np.concatenate([self.charts[c].verts for c in charts])
+        bad = verts[~np.isfinite(dist_s[verts])]
+        if not len(bad):
+            return 0
+        good = verts[np.isfinite(dist_s[verts])]
+        if not len(good):
+            raise ConformalError("no vertex was reached by the front: the UV domain is too thin for "
+                                 "this grid", 'not_reached', 'larger_grid')
+        N = len(dist_s)
+        link = sp.coo_matrix((np.maximum(dist_s[good], 1e-300), (np.full(len(good), N), good)),
+                             shape=(N + 1, N + 1))
+        G = (sp.block_diag([self.graph, sp.csr_matrix((1, 1))]) + link).tocsr()
+        via = dijkstra(G, directed=True, indices=N)[:N]
+        dist_s[bad] = via[bad]
+        if not np.isfinite(dist_s[bad]).all():
+            raise ConformalError(f"{int((~np.isfinite(dist_s[bad])).sum())} vertices were not reached "
+                                 "by the front", 'not_reached', 'larger_grid')
+        return int(len(bad))
 
     def _exact_seed(self, ch, Tloc, tree, X_src, upper, src_local, src_faces):
         """Bound the seed window's chart times ``Tloc`` (ny, nx) by exact values: not below the 3D
