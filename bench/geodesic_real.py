@@ -177,7 +177,7 @@ def run_mesh(name, grids, rows, calib, plot):
         return results[label]
 
     def ours(solver):
-        out, tq, est, warn = [], 0.0, [], 0
+        out, tq, est, warn, med = [], 0.0, [], 0, []
         for s in src:
             t = time.perf_counter()
             d, rep = solver.distance([int(s)])
@@ -185,14 +185,18 @@ def run_mesh(name, grids, rows, calib, plot):
             out.append(d[solver.vert_of])
             est.append(rep['error_estimate'])
             warn += len(rep['warnings'])
-        return out, tq / len(src), {'error_estimate': float(np.mean(est)), 'warnings': warn}
+            fin = d[np.isfinite(d) & (d > 0)]
+            med.append(float(np.median(fin)))
+        return out, tq / len(src), {'error_estimate': float(np.mean(est)), 'warnings': warn,
+                                    'median': float(np.mean(med))}
 
     d_list, tq, rep = ours(gs)
     g_def = max(c.size for c in gs.charts)
     m, x, _ = evaluate(f'ours default (grid {g_def})', d_list, t_setup + tq)
     rows.append((name, len(V), len(F), 'ours default', g_def, m, x, t_setup, tq, rep['error_estimate'],
                  rep['warnings']))
-    calib.append({'mesh': name, 'grid': g_def, 'cell': ch.cell, 'qc_mean': ch.qc_mean,
+    calib.append({'mesh': name, 'grid': g_def, 'cell': ch.cell, 'qc_mean': ch.qc_mean, 'reflex': ch.reflex,
+                  'median': rep['median'],
                   'mean': m, 'max': x, 'estimate': rep['error_estimate']})
     for g in grids:
         if g == g_def:
@@ -205,7 +209,8 @@ def run_mesh(name, grids, rows, calib, plot):
         m, x, _ = evaluate(f'ours grid {g}', d_list, ts + tq)
         rows.append((name, len(V), len(F), 'ours', g, m, x, ts, tq, rep['error_estimate'],
                      rep['warnings']))
-        calib.append({'mesh': name, 'grid': g, 'cell': c2.cell, 'qc_mean': c2.qc_mean,
+        calib.append({'mesh': name, 'grid': g, 'cell': c2.cell, 'qc_mean': c2.qc_mean, 'reflex': c2.reflex,
+                      'median': rep['median'],
                       'mean': m, 'max': x, 'estimate': rep['error_estimate']})
     t = time.perf_counter()
     heat_name, heat = heat_setup(Vs, Fs)

@@ -503,9 +503,26 @@ def _groups(mu_s):
 # "Error estimate" and bench/geodesic_real.py --calibrate. The dominant term is first order in the grid
 # cell: fast marching cuts corners where geodesics bend round reflex boundary corners (measured
 # C = 0.03-0.06 on a corridor, 0.1-0.27 on the woody outline); 0.3 keeps the estimate conservative.
-ERR_GRID_C = 0.3       # mean rel. error ~ C * (mean grid cell in surface units) / (median distance)
+ERR_GRID_C0 = 0.01     # mean rel. error ~ (C0 + C1 * reflex) * (mean grid cell on the surface) / (median
+ERR_GRID_C1 = 0.06     # distance), reflex = the domain's reflex boundary turning / pi, capped at REFLEX_CAP
+REFLEX_CAP = 4.0
 ERR_QC = 0.02          # plus ERR_QC * (area-weighted mean qc - 1): the map is only nearly conformal
 TYPICAL_DISTANCE = 0.35  # before a query, the median distance is taken as this times the 3D bbox diagonal
+
+
+def reflex_turning(uv: np.ndarray, F: np.ndarray) -> float:
+    """How non-convex a UV domain is: the sum over its boundary vertices of the interior angle beyond
+    pi (the UV corner angles around the vertex, minus pi, where positive), divided by pi. ``uv``
+    (k,2), ``F`` (m,3). 0 for a convex domain, 1 for two right-angled reflex corners; holes count."""
+    from ..mesh.geometry import corner_angles
+    from ..mesh.topology import boundary_loops
+    loops = boundary_loops(F, len(uv))
+    if not loops:
+        return 0.0
+    ang = corner_angles(np.c_[uv, np.zeros(len(uv))], F)
+    total = np.bincount(F.ravel(), ang.ravel(), minlength=len(uv))
+    b = np.concatenate([np.asarray(L, np.int64) for L in loops])
+    return float(np.clip(total[b] - np.pi, 0.0, None).sum() / np.pi)
 
 
 def surface_cell(mu_face: np.ndarray, area: np.ndarray, h: float) -> float:
@@ -515,11 +532,13 @@ def surface_cell(mu_face: np.ndarray, area: np.ndarray, h: float) -> float:
     return float((area * (h / mu_face)).sum() / area.sum())
 
 
-def error_estimate(cell: float, distance: float, qc_mean: float) -> float:
+def error_estimate(cell: float, distance: float, qc_mean: float, reflex: float) -> float:
     """Estimated mean relative error (dimensionless) of the distances on a chart whose mean surface
     cell is ``cell`` (``surface_cell``), for a query whose median distance is ``distance`` (mesh
-    units), on a map of area-weighted mean quasi-conformality ``qc_mean`` (>= 1)."""
-    return float(ERR_GRID_C * cell / max(distance, 1e-300) + ERR_QC * max(qc_mean - 1.0, 0.0))
+    units), on a map of area-weighted mean quasi-conformality ``qc_mean`` (>= 1) over a domain with
+    ``reflex_turning`` ``reflex``."""
+    c = ERR_GRID_C0 + ERR_GRID_C1 * min(reflex, REFLEX_CAP)
+    return float(c * cell / max(distance, 1e-300) + ERR_QC * max(qc_mean - 1.0, 0.0))
 
 
 def typical_distance(V: np.ndarray) -> float:
@@ -528,7 +547,7 @@ def typical_distance(V: np.ndarray) -> float:
     return float(TYPICAL_DISTANCE * np.linalg.norm(np.ptp(V, axis=0)))
 
 
-def default_grid_for_target(V, F, uv, mu_face, qc_mean, target=ERROR_TARGET, pad=2):
+def default_grid_for_target(V, F, uv, mu_face, qc_mean, reflex, target=ERROR_TARGET, pad=2):
     """Automatic grid size (nodes along the longer UV side) for one chart, ``V`` (k,3), ``F`` (mi,3),
     ``uv`` (k,2), ``mu_face`` (mi,): the smallest multiple of 64 whose ``error_estimate`` (at the
     ``typical_distance``) meets ``target``, at least ``default_grid`` (8 nodes per mean UV edge) and
@@ -542,7 +561,8 @@ def default_grid_for_target(V, F, uv, mu_face, qc_mean, target=ERROR_TARGET, pad
         return GRID_AUTO_MAX, False
     # cell(grid) = cell_unit / (grid - 1 - 2 pad), as the Grid's spacing
     cell_unit = surface_cell(mu_face, area, ext)
-    g = 1 + 2 * pad + ERR_GRID_C * cell_unit / (room * typical_distance(V))
+    c = ERR_GRID_C0 + ERR_GRID_C1 * min(reflex, REFLEX_CAP)
+    g = 1 + 2 * pad + c * cell_unit / (room * typical_distance(V))
     g = int(64 * np.ceil(max(g, base) / 64))
     if g > GRID_AUTO_MAX:
         return GRID_AUTO_MAX, False
@@ -570,9 +590,10 @@ class Chart:
         self.area = face_areas(V, F)
         from ..mesh.measures import uv_measures
         self.qc_mean = float(uv_measures(V, F, uv)['qc_mean'])
+        self.reflex = reflex_turning(uv, F)
         self.reachable = True
         if grid is None:
-            grid, self.reachable = default_grid_for_target(V, F, uv, mu_f, self.qc_mean, target)
+            grid, self.reachable = default_grid_for_target(V, F, uv, mu_f, self.qc_mean, self.reflex, target)
         G = Grid(uv, grid).rasterise(uv, F)
         self.valid = valid = G.rim(RIM)
         if mu_mode == 'vertex':
@@ -586,7 +607,7 @@ class Chart:
         self.size = int(grid)
         self.P = G.coords(uv)
         self.cell = surface_cell(mu_f, self.area, G.h)
-        self.error_estimate = error_estimate(self.cell, typical_distance(V), self.qc_mean)
+        self.error_estimate = error_estimate(self.cell, typical_distance(V), self.qc_mean, self.reflex)
 
     def node_points(self, ii, jj):
         """3D positions (q,3) of grid nodes (``ii``, ``jj``) (q,), each in the plane of its triangle
@@ -853,7 +874,8 @@ class GeodesicSolver:
             ch = self.charts[c]
             dc = dist_s[ch.verts]
             dc = dc[np.isfinite(dc) & (dc > 0)]
-            ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.qc_mean))
+            ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.qc_mean,
+                                       ch.reflex))
         est = max(ests)
         warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w]
         if filled:
@@ -881,7 +903,6 @@ class GeodesicSolver:
         positions (vertex sources ``loc`` (a,) local indices first, then the surface points in local
         faces ``src_faces`` (b,)). Returns (dist (k,), seed radius in cells, number of marches)."""
         G, mu, valid, inv_mu = ch.grid, ch.mu, ch.valid, ch.inv_mu
-        inside = G.inside
         march_on = ch.march_on                      # inside nodes and the rim nodes that bridge no gap
         rim = valid & ~march_on
         S = G.coords(S_uv)
