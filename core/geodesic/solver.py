@@ -499,15 +499,18 @@ def _groups(mu_s):
 
 # --------------------------------------------------------------------------------------------------
 # accuracy model: error estimate from the local resolution, and the grid size for an error target
-# Calibrated against exact polyhedral distances (MMP) and exact corridor distances: see docs/geodesic.md
-# "Error estimate" and bench/geodesic_real.py --calibrate. The dominant term is first order in the grid
-# cell: fast marching cuts corners where geodesics bend round reflex boundary corners (measured
-# C = 0.03-0.06 on a corridor, 0.1-0.27 on the woody outline); 0.3 keeps the estimate conservative.
-ERR_GRID_C0 = 0.01     # mean rel. error ~ (C0 + C1 * reflex) * (mean grid cell on the surface) / (median
-ERR_GRID_C1 = 0.06     # distance), reflex = the domain's reflex boundary turning / pi, capped at REFLEX_CAP
-REFLEX_CAP = 4.0
-ERR_QC = 0.02          # plus ERR_QC * (area-weighted mean qc - 1): the map is only nearly conformal
+# Fitted on exact polyhedral distances (MMP) and exact corridor distances: docs/geodesic.md "Error
+# estimate", bench/geodesic_real.py --calibrate. Two terms: (1) the grid, first order in the cell where
+# geodesics bend round reflex boundary corners (a convex domain is far more accurate), measured C = 0.03-
+# 0.05 on a corridor with two reflex corners (reflex 1), 0.2 on woody (3.6), 0.16-0.35 on alligator (22);
+# (2) a floor set by the mesh, which no grid removes: the per-vertex mu interpolated over a triangle is
+# not the triangle's own mu (measured floor / spread = 0.010 edgebump, 0.031 bump, 0.032 spot).
+ERR_GRID_C0 = 0.02     # grid term: (C0 + C1 min(reflex, REFLEX_CAP)) * mean surface cell / median distance
+ERR_GRID_C1 = 0.05
+REFLEX_CAP = 6.0
+ERR_MESH = 0.03        # mesh term: ERR_MESH * mu_spread (area-weighted mean of the per-triangle spread)
 TYPICAL_DISTANCE = 0.35  # before a query, the median distance is taken as this times the 3D bbox diagonal
+NODE_BUDGET = 4096 * 4096  # automatic grids of all islands together use at most this many nodes
 
 
 def reflex_turning(uv: np.ndarray, F: np.ndarray) -> float:
@@ -525,6 +528,15 @@ def reflex_turning(uv: np.ndarray, F: np.ndarray) -> float:
     return float(np.clip(total[b] - np.pi, 0.0, None).sum() / np.pi)
 
 
+def mu_spread(F: np.ndarray, mu_face: np.ndarray, area: np.ndarray) -> float:
+    """How far the smooth (per-vertex, ``core.mesh.measures.vertex_mu``) conformal factor departs from
+    the mesh's own per-triangle one: the ``area``-weighted mean over the triangles ``F`` (m,3) of the
+    largest ``|log mu_vertex - log mu_T|`` at their corners (dimensionless). ``mu_face`` (m,)."""
+    lv = np.log(_mesh_vertex_mu(F, mu_face, area, int(F.max()) + 1))
+    s = np.abs(lv[F] - np.log(mu_face)[:, None]).max(1)
+    return float((area * s).sum() / area.sum())
+
+
 def surface_cell(mu_face: np.ndarray, area: np.ndarray, h: float) -> float:
     """The grid's mean cell size in surface units (mesh units): the area-weighted (``area`` (m,)) mean
     over the triangles of ``h / mu_T`` for a grid spacing ``h`` (UV units) and the realised scale
@@ -532,13 +544,17 @@ def surface_cell(mu_face: np.ndarray, area: np.ndarray, h: float) -> float:
     return float((area * (h / mu_face)).sum() / area.sum())
 
 
-def error_estimate(cell: float, distance: float, qc_mean: float, reflex: float) -> float:
+def grid_coefficient(reflex: float) -> float:
+    """The grid term's coefficient for a domain of ``reflex_turning`` ``reflex``."""
+    return ERR_GRID_C0 + ERR_GRID_C1 * min(reflex, REFLEX_CAP)
+
+
+def error_estimate(cell: float, distance: float, spread: float, reflex: float) -> float:
     """Estimated mean relative error (dimensionless) of the distances on a chart whose mean surface
-    cell is ``cell`` (``surface_cell``), for a query whose median distance is ``distance`` (mesh
-    units), on a map of area-weighted mean quasi-conformality ``qc_mean`` (>= 1) over a domain with
-    ``reflex_turning`` ``reflex``."""
-    c = ERR_GRID_C0 + ERR_GRID_C1 * min(reflex, REFLEX_CAP)
-    return float(c * cell / max(distance, 1e-300) + ERR_QC * max(qc_mean - 1.0, 0.0))
+    cell is ``cell`` (``surface_cell``, mesh units), for a query whose median distance is ``distance``
+    (mesh units), on a map with ``mu_spread`` ``spread`` over a domain with ``reflex_turning``
+    ``reflex``: ``grid_coefficient(reflex) * cell / distance + ERR_MESH * spread``."""
+    return float(grid_coefficient(reflex) * cell / max(distance, 1e-300) + ERR_MESH * spread)
 
 
 def typical_distance(V: np.ndarray) -> float:
@@ -547,26 +563,27 @@ def typical_distance(V: np.ndarray) -> float:
     return float(TYPICAL_DISTANCE * np.linalg.norm(np.ptp(V, axis=0)))
 
 
-def default_grid_for_target(V, F, uv, mu_face, qc_mean, reflex, target=ERROR_TARGET, pad=2):
+def default_grid_for_target(V, F, uv, mu_face, spread, reflex, target=ERROR_TARGET, pad=2):
     """Automatic grid size (nodes along the longer UV side) for one chart, ``V`` (k,3), ``F`` (mi,3),
     ``uv`` (k,2), ``mu_face`` (mi,): the smallest multiple of 64 whose ``error_estimate`` (at the
     ``typical_distance``) meets ``target``, at least ``default_grid`` (8 nodes per mean UV edge) and
-    ``GRID_AUTO_MIN``, at most ``GRID_AUTO_MAX``. Returns (grid, reachable): ``reachable`` is False
-    when the cap (or the map's distortion alone) keeps the estimate above the target."""
+    ``GRID_AUTO_MIN``, at most ``GRID_AUTO_MAX``. When the mesh term alone uses up the target, the grid
+    term is only brought to half the mesh term (a finer grid would not help). Returns (grid, limit):
+    ``limit`` None when the target is met, 'cap' when the cap stops it, 'mesh' when the mesh does."""
     area = face_areas(V, F)
     ext = float(np.ptp(uv[np.unique(F)], axis=0).max())
     base = max(default_grid(V, F, uv), GRID_AUTO_MIN)
-    room = target - ERR_QC * max(qc_mean - 1.0, 0.0)
-    if room <= 0:
-        return GRID_AUTO_MAX, False
+    floor = ERR_MESH * spread
+    room, limit = target - floor, None
+    if room < 0.5 * floor:
+        room, limit = 0.5 * floor, 'mesh'
     # cell(grid) = cell_unit / (grid - 1 - 2 pad), as the Grid's spacing
     cell_unit = surface_cell(mu_face, area, ext)
-    c = ERR_GRID_C0 + ERR_GRID_C1 * min(reflex, REFLEX_CAP)
-    g = 1 + 2 * pad + c * cell_unit / (room * typical_distance(V))
+    g = 1 + 2 * pad + grid_coefficient(reflex) * cell_unit / (max(room, 1e-12) * typical_distance(V))
     g = int(64 * np.ceil(max(g, base) / 64))
     if g > GRID_AUTO_MAX:
-        return GRID_AUTO_MAX, False
-    return g, True
+        return GRID_AUTO_MAX, limit or 'cap'
+    return g, limit
 
 
 # --------------------------------------------------------------------------------------------------
@@ -577,37 +594,44 @@ class Chart:
     ``verts`` (k,) the split vertices of the island (indices into the solver's split arrays);
     ``V`` (k,3) their positions; ``F`` (mi,3) the island's triangles in local indices; ``faces`` (mi,)
     their indices in the input ``F``; ``uv`` (k,2) the map, rotated to its smallest bounding
-    rectangle; ``mu_face`` (mi,) realised per-triangle scale; ``grid`` (``Grid``) with ``mu``,
-    ``inv_mu`` and ``valid`` (ny, nx); ``P`` (k,2) node coordinates of the vertices; ``cell`` the mean
-    grid cell in surface units; ``error_estimate`` (mean relative, dimensionless, at the typical
-    distance; a query re-estimates it from its own distances) and ``reachable`` (False when the
-    automatic grid hit its cap)."""
+    rectangle; ``mu_face`` (mi,) realised per-triangle scale; ``spread`` (``mu_spread``), ``reflex``
+    (``reflex_turning``); ``size`` the grid size and ``limit`` (None, 'cap', 'mesh' or 'budget': what
+    kept the automatic grid from the target). After ``rasterise``: ``grid`` (``Grid``) with ``mu``,
+    ``inv_mu``, ``valid`` and ``march_on`` (ny, nx); ``P`` (k,2) node coordinates of the vertices;
+    ``cell`` the mean grid cell in surface units; ``error_estimate`` (mean relative, at the typical
+    distance; a query re-estimates it from its own distances)."""
 
-    def __init__(self, V, F, uv, verts, faces, grid, mu_mode, target):
+    def __init__(self, V, F, uv, verts, faces, grid, target):
         self.verts, self.faces, self.V, self.F = verts, faces, V, F
         self.uv = uv = align_uv(uv)
         self.mu_face = mu_f = face_mu(V, F, uv)
         self.area = face_areas(V, F)
-        from ..mesh.measures import uv_measures
-        self.qc_mean = float(uv_measures(V, F, uv)['qc_mean'])
+        self.spread = mu_spread(F, mu_f, self.area)
         self.reflex = reflex_turning(uv, F)
-        self.reachable = True
+        self.limit = None
         if grid is None:
-            grid, self.reachable = default_grid_for_target(V, F, uv, mu_f, self.qc_mean, self.reflex, target)
-        G = Grid(uv, grid).rasterise(uv, F)
+            grid, self.limit = default_grid_for_target(V, F, uv, mu_f, self.spread, self.reflex, target)
+        self.size = int(grid)
+        ext = np.ptp(uv, axis=0)
+        self.nodes = float(self.size) ** 2 * float(ext.min() / ext.max())       # about, for the budget
+
+    def rasterise(self, mu_mode):
+        """Build the grid of ``size`` nodes and the fields on it (see the class docstring)."""
+        uv, F, mu_f = self.uv, self.F, self.mu_face
+        G = Grid(uv, self.size).rasterise(uv, F)
         self.valid = valid = G.rim(RIM)
         if mu_mode == 'vertex':
-            mu = G.interpolate(uv, F, _mesh_vertex_mu(F, mu_f, self.area, len(V)))
+            mu = G.interpolate(uv, F, _mesh_vertex_mu(F, mu_f, self.area, len(self.V)))
         else:
             mu = G.interpolate(uv, F, face_values=mu_f)
         self.mu = np.where(valid, np.clip(mu, mu_f.min(), mu_f.max()), 1.0)
         self.march_on = valid & ~bridging_rim(G, F, valid)
         self.inv_mu = 1.0 / self.mu
         self.grid = G
-        self.size = int(grid)
         self.P = G.coords(uv)
         self.cell = surface_cell(mu_f, self.area, G.h)
-        self.error_estimate = error_estimate(self.cell, typical_distance(V), self.qc_mean, self.reflex)
+        self.error_estimate = error_estimate(self.cell, typical_distance(self.V), self.spread, self.reflex)
+        return self
 
     def node_points(self, ii, jj):
         """3D positions (q,3) of grid nodes (``ii``, ``jj``) (q,), each in the plane of its triangle
@@ -669,8 +693,9 @@ class GeodesicSolver:
 
     V (n,3) float, F (m,3) int triangles. ``uv`` (n,2): a fold-free conformal map to reuse (any scale;
     each connected part is its own chart); None flattens: a single part without ``seams`` with
-    ``core.disk.flatten`` (``boundary`` 'uniform', 'area' or 'free'), else every island of
-    ``core.atlas.islands.unwrap`` (``seams`` (k,2) vertex pairs cut the surface; distances are measured
+    ``core.disk.flatten`` (``boundary`` 'uniform', 'area' or 'free'), else (several parts, seams,
+    holes, loose vertices) every island of ``core.atlas.islands.unwrap`` (holes filled virtually;
+    ``seams`` (k,2) vertex pairs cut the surface; distances are measured
     on the cut surface). Distances between islands are infinite. A closed island has no flat chart:
     use sphere mode (``core.sphere.geodesic``) or mark seams. ``grid``: nodes along the longer UV
     side of every chart (64..4096), None: per chart from ``error_target`` (``default_grid_for_target``).
@@ -718,7 +743,8 @@ class GeodesicSolver:
             from ..mesh.topology import face_components
             count, face_island = face_components(F, self.n)
             say(0.0, 'flattening')
-            if count == 1 and seams is None:
+            from ..mesh.topology import boundary_loops
+            if count == 1 and seams is None and self.on_mesh.all() and len(boundary_loops(F, self.n)) == 1:
                 from ..disk.flatten import flatten
                 res = flatten(V, F, boundary=boundary, fit='true_scale', bound=False)
                 vert_of, Fs, uvs = np.arange(self.n), F, res.uv
@@ -749,13 +775,22 @@ class GeodesicSolver:
             verts, Fl = np.unique(Fg, return_inverse=True)
             Fl = Fl.reshape(-1, 3)
             try:
-                ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, mu_mode, self.error_target)
+                ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, self.error_target)
             except ConformalError as exc:
                 raise (exc.with_context(f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles)")
                        if len(cuts) else exc) from None
             self.chart_of_split[verts] = c
             self.local_of_split[verts] = np.arange(len(verts))
             self.charts.append(ch)
+        if grid is None:                        # automatic grids: all islands within the node budget
+            total = sum(ch.nodes for ch in self.charts)
+            if total > NODE_BUDGET:
+                k = np.sqrt(NODE_BUDGET / total)
+                for ch in self.charts:
+                    ch.size = int(max(GRID_MIN, 64 * np.floor(ch.size * k / 64)))
+                    ch.limit = ch.limit or 'budget'
+        for ch in self.charts:
+            ch.rasterise(mu_mode)
         # the edge graph of the cut surface, for the upper bound (Dijkstra)
         import scipy.sparse as sp
         E = np.concatenate([self.Fs[:, [0, 1]], self.Fs[:, [1, 2]], self.Fs[:, [2, 0]]])
@@ -776,8 +811,14 @@ class GeodesicSolver:
         where = f" on island {chart + 1} of {len(self.charts)}" if len(self.charts) > 1 else ""
         msg = (f"estimated mean error {100 * est:.3g}%{where} is above the target "
                f"{100 * self.error_target:.3g}% (grid {ch.size}")
-        if not ch.reachable:
+        if ch.limit == 'mesh' or ERR_MESH * ch.spread > 0.5 * self.error_target:
+            return msg + (f"; the mesh alone accounts for {100 * ERR_MESH * ch.spread:.2g}%: its conformal "
+                          "factor varies too much across triangles): subdivide the mesh, or use a more "
+                          "uniform map (boundary 'uniform')")
+        if ch.limit == 'cap':
             msg += f", the automatic grid is capped at {GRID_AUTO_MAX}"
+        elif ch.limit == 'budget':
+            msg += f", the islands' automatic grids share a budget of {NODE_BUDGET:,} nodes"
         return msg + "): use a larger grid, or a more uniform map (boundary 'uniform')"
 
     def _upper_bound(self, src_split, pf, pb):
@@ -874,7 +915,7 @@ class GeodesicSolver:
             ch = self.charts[c]
             dc = dist_s[ch.verts]
             dc = dc[np.isfinite(dc) & (dc > 0)]
-            ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.qc_mean,
+            ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.spread,
                                        ch.reflex))
         est = max(ests)
         warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w]
