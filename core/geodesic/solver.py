@@ -20,7 +20,7 @@ Set-up (``GeodesicSolver``):
    rasterise ``mu`` with linear interpolation onto the grid (``Grid``); nodes outside the domain are
    masked, except a one-node rim with extrapolated ``mu`` so that boundary vertices can be sampled.
 3. The error estimate of every chart (``error_estimate``) from its local resolution, the grid cell
-   in surface units ``h / mu``, and its conformal distortion.
+   in surface units ``h / mu``, the non-convexity of its domain and the mesh's own floor.
 
 A query (``GeodesicSolver.distance``):
 
@@ -30,9 +30,11 @@ A query (``GeodesicSolver.distance``):
    distance in the triangles around the source (exact there: the geodesic is a straight segment in
    the triangle). ``calibrate_phi`` sets the level-set values on the seed's rim so that scikit-fmm's
    first front values are exact (no point-source offset, scikit-fmm issue #22).
+   A seed node takes the chart time only if the straight UV segment stays in the domain (``_visible``).
 5. March with scikit-fmm ``travel_time(order=2)`` or, without scikit-fmm, the numpy fast sweeping
-   solver of ``core.geodesic.eikonal``. Sources whose ``mu`` differ by more than a factor 2 march
-   separately and the minimum is taken.
+   solver of ``core.geodesic.eikonal``, without the rim nodes that bridge gaps of the domain
+   (``bridging_rim``; they get extrapolated times, ``extrapolate_rim``). Sources whose ``mu`` differ
+   by more than a factor 2 march separately and the minimum is taken.
 6. Sample the travel time back to the vertices bilinearly, then clamp each vertex between two exact
    bounds: the 3D distance to the nearest source (below) and the shortest edge path (Dijkstra, above).
 """
