@@ -10,22 +10,28 @@ units, object space), the colour attribute ``geodesic_distance_color`` (colour m
 optionally with iso-line bands), the mesh custom property ``geodesic_distance_range`` and a JSON report
 ``conformal_geodesic_report``.
 
-Reusing the flattening: the conformal map a run computed is kept in the hidden point attribute
-``.conformal_geodesic_uv`` with a hash of the positions and polygons; the next run on an unchanged
-mesh with the same boundary mode skips the flattening. A whole-mesh, single-island result of the
-flatten operator (``uv.conformal_flatten``) on the unchanged mesh is reused the same way. Everything is
+Reuse: the add-on keeps the ``core.geodesic.solver.GeodesicSolver`` of the last few runs in memory
+(flattening, grids and rasterised conformal factor), keyed on a hash of the positions and polygons
+and on the options (boundary mode, grid, seams); the next run on an unchanged mesh with the same
+options only marches. Otherwise a whole-mesh, single-island result of the flatten operator
+(``uv.conformal_flatten``) on the unchanged mesh is used as the map.
+
+Several parts are one island each (distances are infinite between them: such vertices get 0 in the
+attribute and the no-value grey). With ``use_seams`` the surface is cut along the edges marked as
+seams and distances are measured on the cut surface. A closed part needs seams or sphere mode.
+
+Every report carries ``error_estimate`` (mean relative error, from the grid's resolution on the
+surface) and ``warnings``; the operator reports a WARNING when that list is not empty. Everything is
 computed before anything is written: on bad input the operator reports the core's message as an ERROR
 and the mesh is untouched."""
-import json
 import time
 
 import bpy
 import numpy as np
-from bpy.props import EnumProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from ..core.errors import ConformalError
-from ..core.disk.flatten import flatten
-from ..core.geodesic.solver import face_mu, geodesic_distance
+from ..core.geodesic.solver import GeodesicSolver
 from . import meshio
 from .colormap import colormap
 from .apply import REPORT_KEY as FLATTEN_REPORT_KEY
@@ -37,8 +43,8 @@ REPORT_KEY = 'conformal_geodesic_report'
 ATTR_NAME = 'geodesic_distance'
 COLOR_NAME = ATTR_NAME + '_color'
 RANGE_KEY = ATTR_NAME + '_range'
-UV_CACHE = '.conformal_geodesic_uv'          # FLOAT2 point attribute: the conformal map last used
-CACHE_KEY = 'conformal_geodesic_cache'       # JSON {mesh_hash, boundary} describing UV_CACHE
+UV_CACHE = '.conformal_geodesic_uv'          # map cache of earlier versions: removed when found
+CACHE_KEY = 'conformal_geodesic_cache'       # its JSON description: removed when found
 NO_VALUE_RGBA = (0.5, 0.5, 0.5, 1.0)
 
 SOURCE_ITEMS = [
@@ -91,28 +97,46 @@ def pick_sources(context, obj, md, how, was_edit, active):
 
 
 # ----------------------------------------------------------------------------------------------
-# the conformal map: reuse or compute
+# the solver: reuse or compute
 # ----------------------------------------------------------------------------------------------
-def _read_float2(me, name):
-    attr = me.attributes.get(name)
-    if attr is None or attr.domain != 'POINT' or attr.data_type != 'FLOAT2':
-        return None
-    buf = np.empty(len(me.vertices) * 2, np.float32)
-    attr.data.foreach_get('vector', buf)
-    return buf.reshape(-1, 2).astype(np.float64)
+SOLVER_CACHE_SIZE = 4
+_solvers = {}          # cache key -> GeodesicSolver, most recently used last
 
 
-def cached_uv(me, md, boundary, digest):
-    """The per-vertex conformal map (n,2) that can be reused for ``md`` with ``boundary`` mode, and
-    where it came from ('geodesic cache' or 'flatten operator'); (None, None) if there is none."""
-    try:
-        cache = json.loads(me.get(CACHE_KEY) or 'null')
-    except (TypeError, ValueError):
-        cache = None
-    if cache and cache.get('mesh_hash') == digest and cache.get('boundary') == boundary:
-        uv = _read_float2(me, UV_CACHE)
-        if uv is not None and np.isfinite(uv).all():
-            return uv, 'geodesic cache'
+def solver_key(digest, boundary, grid, use_seams, seams):
+    """The cache key of a solver: the mesh hash (``ops_flatten.mesh_hash``: positions and polygons),
+    the options that change the charts or grids, and the seams when they cut."""
+    import hashlib
+    h = hashlib.blake2b(digest_size=8)
+    if use_seams and seams is not None:
+        h.update(np.ascontiguousarray(np.sort(seams, axis=1), np.int64).tobytes())
+    return (digest, boundary, int(grid or 0), bool(use_seams), h.hexdigest())
+
+
+def cached_solver(key):
+    """The kept ``GeodesicSolver`` for ``key`` (``solver_key``), or None."""
+    gs = _solvers.pop(key, None)
+    if gs is not None:
+        _solvers[key] = gs                      # most recently used last
+    return gs
+
+
+def keep_solver(key, gs):
+    """Keep ``gs`` for ``key``, dropping the least recently used beyond ``SOLVER_CACHE_SIZE``."""
+    _solvers.pop(key, None)
+    _solvers[key] = gs
+    while len(_solvers) > SOLVER_CACHE_SIZE:
+        _solvers.pop(next(iter(_solvers)))
+
+
+def clear_solvers():
+    """Forget every kept solver (on unregister, and for tests)."""
+    _solvers.clear()
+
+
+def flatten_operator_uv(me, md, boundary, digest):
+    """The per-vertex conformal map (n,2) of the flatten operator (``uv.conformal_flatten``) when it
+    applies to ``md`` unchanged, as one island, with the same ``boundary`` mode; else None."""
     rep = meshio.load_report(me, FLATTEN_REPORT_KEY)
     if (rep and rep.get('mesh_hash') == digest and rep.get('boundary') == boundary
             and rep.get('islands') == 1 and rep.get('triangles') == len(md.tri_corners)
@@ -124,8 +148,35 @@ def cached_uv(me, md, boundary, digest):
             ext = float(np.ptp(loop_uv, axis=0).max()) if len(loop_uv) else 0.0
             # one chart: every corner of a vertex has the vertex's UV (no seams, not re-edited)
             if ext > 0 and np.abs(uv[md.corner_verts] - loop_uv).max() <= 1e-5 * ext:
-                return uv, 'flatten operator'
-    return None, None
+                return uv
+    return None
+
+
+def get_solver(me, md, boundary, grid, use_seams, digest, progress=None):
+    """A ``GeodesicSolver`` for the mesh ``md`` and where it came from: 'geodesic cache' (kept from
+    an earlier run on the unchanged mesh with the same options), 'flatten operator' (built on the
+    flatten operator's map) or 'computed'. Raises ``ConformalError``."""
+    seams = None
+    if use_seams:
+        cut = meshio.read_seams(me)
+        seams = meshio.read_edges(me)[cut] if cut.any() else None
+    key = solver_key(digest, boundary, grid, use_seams, seams)
+    gs = cached_solver(key)
+    if gs is not None:
+        return gs, 'geodesic cache'
+    uv = flatten_operator_uv(me, md, boundary, digest) if seams is None else None
+    origin = 'computed'
+    if uv is not None:
+        try:
+            gs = GeodesicSolver(md.V, md.F, uv=uv, grid=grid, progress=progress)
+            origin = 'flatten operator'
+        except ConformalError:                  # a stored map that folds is not reused
+            gs = None
+    if gs is None:
+        gs = GeodesicSolver(md.V, md.F, boundary=boundary.lower(), grid=grid, seams=seams,
+                            progress=progress)
+    keep_solver(key, gs)
+    return gs, origin
 
 
 # ----------------------------------------------------------------------------------------------
@@ -151,11 +202,13 @@ def distance_colors(dist, bands=10, colormap_name='PERCEPTUAL'):
 # the whole job
 # ----------------------------------------------------------------------------------------------
 def geodesic_object(context, obj=None, source='AUTO', grid=0, boundary='UNIFORM', bands=10,
-                    colormap_name=None, progress=None):
+                    colormap_name=None, use_seams=False, progress=None):
     """Compute and bake geodesic distances on mesh object ``obj`` (default: the active object); see
-    the module docstring. ``grid`` 0: the add-on preference, else automatic. Returns the report dict
-    (also stored as JSON in ``obj.data[REPORT_KEY]``). Raises ``ConformalError`` with nothing
-    written. Usable from scripts without the operator."""
+    the module docstring. ``grid`` 0: the add-on preference, else automatic (from the error
+    target). ``use_seams``: cut the surface along the edges marked as seams (distances on the cut
+    surface). Returns the report dict (also stored as JSON in ``obj.data[REPORT_KEY]``); its
+    ``warnings`` list is non-empty when the result misses the accuracy target or islands were not
+    reached. Raises ``ConformalError`` with nothing written. Usable from scripts without the operator."""
     t0 = time.perf_counter()
     obj = meshio.mesh_object(context, obj)
     prefs = get_prefs(context)
@@ -169,49 +222,39 @@ def geodesic_object(context, obj=None, source='AUTO', grid=0, boundary='UNIFORM'
         md = meshio.read_mesh(me)
         sources, described = pick_sources(context, obj, md, source, was_edit, active)
         digest = mesh_hash(md)
-        mode = boundary.lower()
-        uv, reused = cached_uv(me, md, boundary, digest)
-        t_flat = 0.0
-        if uv is not None:
-            try:
-                face_mu(md.V, md.F, uv)           # a stored map that folds is not reused
-            except ConformalError:
-                uv, reused = None, None
-        if uv is None:
-            say(0.0, 'flattening')
-            t = time.perf_counter()
-            res = flatten(md.V, md.F, boundary=mode, fit='true_scale', bound=False,
-                          progress=lambda f, m: say(0.5 * f, m))
-            t_flat = time.perf_counter() - t
-            uv = res.uv
-        lo_p = 0.5 if reused is None else 0.05
-        dist, rep = geodesic_distance(md.V, md.F, sources, uv=uv, grid=grid,
-                                      progress=lambda f, m: say(lo_p + (0.95 - lo_p) * f, m))
+        t = time.perf_counter()
+        gs, origin = get_solver(me, md, boundary, grid, use_seams, digest,
+                                progress=lambda f, m: say(0.5 * f, m))
+        t_setup = time.perf_counter() - t
+        lo_p = 0.5 if origin != 'geodesic cache' else 0.05
+        dist, rep = gs.distance(sources, progress=lambda f, m: say(lo_p + (0.95 - lo_p) * f, m))
         # --- everything computed: write
         ok = np.isfinite(dist)
         meshio.write_point_float(me, ATTR_NAME, np.where(ok, dist, 0.0))
         meshio.write_point_color(me, COLOR_NAME, distance_colors(dist, bands, colormap_name))
         lo, hi = (float(dist[ok].min()), float(dist[ok].max())) if ok.any() else (0.0, 0.0)
         me[RANGE_KEY] = [lo, hi]
-        if reused != 'geodesic cache':
-            attr = me.attributes.get(UV_CACHE)
-            if attr is not None and (attr.domain != 'POINT' or attr.data_type != 'FLOAT2'):
+        for stale in (UV_CACHE,):                 # the map cache of earlier versions
+            attr = me.attributes.get(stale)
+            if attr is not None:
                 me.attributes.remove(attr)
-                attr = None
-            if attr is None:
-                attr = me.attributes.new(UV_CACHE, 'FLOAT2', 'POINT')
-            attr.data.foreach_set('vector', np.ascontiguousarray(uv, np.float32).ravel())
-            me[CACHE_KEY] = json.dumps({'mesh_hash': digest, 'boundary': boundary})
+        if CACHE_KEY in me:
+            del me[CACHE_KEY]
         me.update()
         ny, nx = rep['grid']
         report = {
             'object': obj.name, 'mesh': me.name, 'vertices': md.n_vertices,
             'triangles': int(len(md.tri_corners)), 'sources': [int(s) for s in sources[:100]],
             'source_count': int(len(sources)), 'source_description': described,
-            'boundary': boundary, 'flattening': reused or 'computed', 'grid': [nx, ny],
+            'boundary': boundary, 'flattening': origin, 'grid': [nx, ny],
             'cell': rep['cell'], 'masked_fraction': rep['masked_fraction'], 'solver': rep['solver'],
             'distance_range': [lo, hi], 'bands': int(bands), 'mesh_hash': digest,
-            'seconds': {'flatten': round(t_flat, 4), 'geodesic': rep['seconds'].get('total'),
+            'islands': rep['islands'], 'islands_reached': rep['islands_reached'],
+            'unreached_vertices': int((~ok & md_used(md)).sum()), 'use_seams': bool(use_seams),
+            'error_estimate': rep['error_estimate'], 'error_target': rep['error_target'],
+            'clamped': rep['clamped'], 'warnings': list(rep['warnings']),
+            'seconds': {'flatten': round(t_setup if origin != 'geodesic cache' else 0.0, 4),
+                        'geodesic': rep['seconds'].get('total'),
                         'total': round(time.perf_counter() - t0, 4)},
             'core_seconds': rep['seconds'],
         }
@@ -220,13 +263,20 @@ def geodesic_object(context, obj=None, source='AUTO', grid=0, boundary='UNIFORM'
     return report
 
 
+def md_used(md):
+    """(n,) bool: vertices on some triangle."""
+    used = np.zeros(md.n_vertices, bool)
+    used[md.F.ravel()] = True
+    return used
+
+
 def summary_line(r):
     """One line for the status bar."""
     solver = "scikit-fmm" if r['solver'] == 'skfmm' else "numpy sweeping"
     flat = "reused flattening" if r['flattening'] != 'computed' else f"flattened ({r['boundary'].lower()})"
     return (f"Geodesic distance on {r['object']!r} from {r['source_description']}: max "
             f"{r['distance_range'][1]:.4g}, grid {r['grid'][0]}x{r['grid'][1]} ({solver}), {flat}, "
-            f"{r['seconds']['total']:.2f} s")
+            f"{r['seconds']['total']:.2f} s, estimated mean error {100 * r['error_estimate']:.2g}%")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -249,6 +299,10 @@ class MESH_OT_conformal_geodesic_distance(bpy.types.Operator):
     bands: IntProperty(name="Iso-line Bands", default=10, min=0, max=200,
                        description="Darken every other of this many equal distance bands in the colour "
                                    "attribute (0: plain colour map)")
+    use_seams: BoolProperty(name="Cut Along Seams", default=False,
+                            description="Cut the surface along the edges marked as seams and measure "
+                                        "distances on the cut surface (needed for closed meshes outside "
+                                        "sphere mode); distances do not cross between pieces")
 
     @classmethod
     def poll(cls, context):
@@ -259,11 +313,14 @@ class MESH_OT_conformal_geodesic_distance(bpy.types.Operator):
         try:
             with meshio.Progress(context) as progress:
                 report = geodesic_object(context, None, source=self.source, grid=self.grid,
-                                         boundary=self.boundary, bands=self.bands, progress=progress)
+                                         boundary=self.boundary, bands=self.bands,
+                                         use_seams=self.use_seams, progress=progress)
         except ConformalError as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
         self.report({'INFO'}, summary_line(report))
+        for w in report['warnings']:
+            self.report({'WARNING'}, w)
         return {'FINISHED'}
 
 
@@ -272,6 +329,7 @@ class ConformalGeodesicSettings(bpy.types.PropertyGroup):
                       description="Grid nodes along the longer side (0: preference or automatic)")
     source: EnumProperty(name="Source", items=SOURCE_ITEMS, default='AUTO')
     bands: IntProperty(name="Iso-line Bands", default=10, min=0, max=200)
+    use_seams: BoolProperty(name="Cut Along Seams", default=False)
 
 
 GEODESIC_ROWS = [
@@ -280,6 +338,8 @@ GEODESIC_ROWS = [
     ("Grid", lambda r: f"{r['grid'][0]} x {r['grid'][1]}"),
     ("Solver", 'solver'),
     ("Flattening", 'flattening'),
+    ("Error estimate", lambda r: f"{100 * r['error_estimate']:.2g} %" if 'error_estimate' in r else "-"),
+    ("Warnings", lambda r: str(len(r.get('warnings', []))) if r.get('warnings') else "none"),
     ("Time", lambda r: f"{r['seconds']['total']:.2f} s" if r.get('seconds') else "-"),
 ]
 
@@ -297,8 +357,10 @@ class _GeodesicPanel:
         col.prop(settings, 'source')
         col.prop(settings, 'grid')
         col.prop(settings, 'bands')
+        col.prop(settings, 'use_seams')
         op = col.operator(MESH_OT_conformal_geodesic_distance.bl_idname, icon='DRIVER_DISTANCE')
         op.source, op.grid, op.bands = settings.source, settings.grid, settings.bands
+        op.use_seams = settings.use_seams
         if flat is not None:
             op.boundary = flat.boundary
         obj = context.active_object
@@ -319,6 +381,7 @@ def register():
 
 def unregister():
     from .sidebar import unregister_tool
+    clear_solvers()
     unregister_tool(ConformalGeodesicSettings, 'conformal_geodesic',
                     MESH_OT_conformal_geodesic_distance, _registered)
     _registered.clear()

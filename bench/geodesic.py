@@ -8,8 +8,8 @@ Tables:
 1. Acceptance: bump n=129, grid 1024, sources 0 (corner), 8320 (centre), 64 (edge midpoint) and
    0+8320 together; scikit-fmm path and the numpy sweep fallback.
 2. The paper's point: the same grid (256 and 1024) on the `free` (LSCM) map and on the `area` and
-   `uniform` maps, for bump (n=129) and edgebump (n=65 and 129). A uniform conformal factor spreads the grid's resolution evenly
-   over the surface.
+   `uniform` maps, for bump (n=129) and edgebump (n=65 and 129). A uniform conformal factor spreads the
+   grid's resolution evenly over the surface.
 3. Error and time against grid size (256 .. 2048).
 
 Errors are relative to the exact distance, over vertices farther than 0.05 from the source (mean and
@@ -108,7 +108,8 @@ def table_grid(uv_cache, grids=(256, 512, 1024, 2048)):
     uv, _, _ = uv_cache('bump', 129, 'uniform')
     D = references('bump', 129, (0, 8320))
     print("\n### Error and time against grid size (bump n=129, `uniform` map, scikit-fmm)\n")
-    print("| grid | cell (mesh units) | source 0 mean / max | source 8320 mean / max | seconds (rasterise, solve, sample) |")
+    print("| grid | cell (mesh units) | source 0 mean / max | source 8320 mean / max | "
+          "seconds (rasterise, solve, sample) |")
     print("|---|---|---|---|---|")
     for g in grids:
         row = []

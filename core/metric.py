@@ -248,7 +248,7 @@ def march(grid, w, src, solver='auto'):
     to the rim at their exact times (no point-source offset), and adds ``tau`` back; 'sweep' runs
     ``core.eikonal`` (pure numpy) from the fixed seed times; 'auto' picks scikit-fmm if it imports.
     Also returns the bool (ny,nx) mask of seed nodes (inside the disk or next to it)."""
-    from .geodesic.solver import calibrate_phi, march as eikonal_march
+    from .geodesic.solver import calibrate_phi, eikonal_march
     solver = _solver(solver)
     x, y = grid.coords()
     h = grid.h
@@ -500,9 +500,12 @@ def vertex_areas(V, F):
 def vertex_mu(V, F, uv):
     """Per-vertex conformal factor (n,) of the map ``uv`` (UV units per surface unit): the realised
     per-triangle scale ``sqrt(A_uv / A_3d)`` averaged over each vertex's triangles in log, weighted by
-    area (``core.geodesic``)."""
-    from .geodesic.solver import face_mu, vertex_mu as average
-    return average(V, F, face_mu(V, F, uv))
+    area (``core.mesh.measures.vertex_mu``); 1 on vertices in no triangle."""
+    from .geodesic.solver import face_mu
+    from .mesh.geometry import face_areas
+    from .mesh.measures import vertex_mu as average
+    out = average(F, face_mu(V, F, uv), face_areas(V, F), len(V))
+    return np.where(np.isfinite(out), out, 1.0)
 
 
 def check_measurements(n, sources, sensors, times):

@@ -197,3 +197,75 @@ def test_panel_draws_button_and_report(addon, bl):
     assert "Max distance" in labels and "Solver" in labels and "skfmm" in labels
     from conformal_flatten.addon import ui
     assert ui.geodesic_solver_label() == 'scikit-fmm'
+
+
+def test_solver_is_kept_for_a_second_source(addon, bl, monkeypatch):
+    """A second run on the unchanged mesh with another source neither flattens nor rasterises."""
+    import conformal_flatten.core.disk.flatten as flatten_module
+    from conformal_flatten.core.geodesic import solver as gsol
+    calls = {'flatten': 0, 'rasterise': 0}
+    real_flatten, real_rasterise = flatten_module.flatten, gsol.Grid.rasterise
+
+    def counting_flatten(*a, **k):
+        calls['flatten'] += 1
+        return real_flatten(*a, **k)
+
+    def counting_rasterise(self, *a, **k):
+        calls['rasterise'] += 1
+        return real_rasterise(self, *a, **k)
+
+    monkeypatch.setattr(flatten_module, 'flatten', counting_flatten)
+    monkeypatch.setattr(gsol.Grid, 'rasterise', counting_rasterise)
+    obj, V, F = bump_object(bl)
+    me = obj.data
+    for k in (40, 700):
+        bpy.context.scene.cursor.location = tuple(V[k])
+        assert bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA',
+                                                        source='CURSOR') == {'FINISHED'}
+        d = point_attr(me, 'geodesic_distance')
+        assert int(np.argmin(d)) == k
+    assert calls == {'flatten': 1, 'rasterise': 1}
+    assert report_of(me)['flattening'] == 'geodesic cache'
+    assert '.conformal_geodesic_uv' not in me.attributes          # a solver is kept, not a UV map
+
+
+def test_parts_are_islands_and_seams_cut(addon, bl):
+    """Two parts: the part with the source gets distances, the other none (0 and grey), with a
+    warning. A closed UV sphere fails without seams and works with a seam loop on the equator."""
+    from conformal_flatten.core.surfaces import make_surface
+    V1, F1 = make_surface('bump', 17)
+    V = np.vstack([V1, V1 + [6.0, 0.0, 0.0]])
+    F = np.vstack([F1, F1 + len(V1)])
+    obj = bl.mesh_object('two', V, F)
+    bpy.context.scene.cursor.location = tuple(V[100])
+    assert bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA') == {'FINISHED'}
+    rep = report_of(obj.data)
+    assert rep['islands'] == 2 and rep['islands_reached'] == 1 and rep['unreached_vertices'] == len(V1)
+    assert any('no source' in w for w in rep['warnings'])
+    d = point_attr(obj.data, 'geodesic_distance')
+    assert d[100] < 1e-6 and (d[len(V1):] == 0).all() and (d[:len(V1)] > 0).sum() == len(V1) - 1
+    rgba = point_attr(obj.data, 'geodesic_distance_color', 4, 'color')
+    assert np.allclose(rgba[len(V1):, :3], 0.5)
+    # a closed sphere: an error without seams, distances on the cut surface with them
+    bpy.context.scene.cursor.location = (0.0, 0.0, 0.0)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)        # at the cursor: the origin
+    sphere = bpy.context.active_object
+    me = sphere.data
+    with pytest.raises(RuntimeError, match='closed'):
+        bpy.ops.mesh.conformal_geodesic_distance(grid=256)
+    co = np.array([v.co[:] for v in me.vertices])
+    for e in me.edges:
+        a, b = e.vertices
+        e.use_seam = bool(abs(co[a, 2]) < 1e-6 and abs(co[b, 2]) < 1e-6)
+    assert sum(e.use_seam for e in me.edges) == 16
+    top = int(np.argmax(co[:, 2]))
+    bpy.context.scene.cursor.location = tuple(co[top])
+    assert bpy.ops.mesh.conformal_geodesic_distance(grid=256, use_seams=True) == {'FINISHED'}
+    rep = report_of(me)
+    assert rep['islands'] == 2 and rep['use_seams']
+    d = point_attr(me, 'geodesic_distance')
+    north = co[:, 2] > 1e-6
+    assert (d[north] > 0).sum() == north.sum() - 1 and (d[co[:, 2] < -1e-6] == 0).all()
+    # the pole-to-equator distance is a quarter of the (polyhedral) great circle, about pi/2
+    eq = np.abs(co[:, 2]) < 1e-6
+    assert np.all(np.abs(d[eq] - np.pi / 2) < 0.05)

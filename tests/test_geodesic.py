@@ -1,4 +1,5 @@
-"""Geodesic distance by fast marching on the conformal plane (core.geodesic.solver, core.geodesic.eikonal, CLI).
+"""Geodesic distance by fast marching on the conformal plane (core.geodesic.solver, core.geodesic.eikonal,
+CLI).
 
 Exact references: tests/data/geodesic_ref_*.npz (pygeodesic exact MMP, bench/make_refdata.py)."""
 import os
@@ -286,3 +287,189 @@ def test_loose_vertex_gets_nan_and_does_not_shift_the_grid(flat):
     d0, rep0 = geo.geodesic_distance(V, F, [2112], uv=uv, grid=512)
     assert rep['grid'] == rep0['grid']
     np.testing.assert_allclose(d[:-1], d0, rtol=1e-12, atol=1e-12)
+
+
+# ------------------------------------------------------------------------------------------------
+# GeodesicSolver: the per-mesh work is done once
+def test_solver_answers_a_second_source_without_reflattening(monkeypatch):
+    import core.disk.flatten as flatten_module
+    calls = {'flatten': 0, 'rasterise': 0}
+    real_flatten, real_rasterise = flatten_module.flatten, geo.Grid.rasterise
+
+    def counting_flatten(*a, **k):
+        calls['flatten'] += 1
+        return real_flatten(*a, **k)
+
+    def counting_rasterise(self, *a, **k):
+        calls['rasterise'] += 1
+        return real_rasterise(self, *a, **k)
+
+    monkeypatch.setattr(flatten_module, 'flatten', counting_flatten)
+    monkeypatch.setattr(geo.Grid, 'rasterise', counting_rasterise)
+    V, F = make_surface('bump', 33)
+    gs = geo.GeodesicSolver(V, F, boundary='area', grid=256)
+    assert calls == {'flatten': 1, 'rasterise': 1}
+    d0, r0 = gs.distance([0])
+    d1, r1 = gs.distance([544])
+    d2, _ = gs.distance(points=([100], [[0.2, 0.3, 0.5]]))
+    assert calls == {'flatten': 1, 'rasterise': 1}
+    assert d0[0] == pytest.approx(0, abs=1e-12) and d1[544] == pytest.approx(0, abs=1e-12)
+    assert int(np.argmin(d1)) == 544 and d1[0] == pytest.approx(d0[544], rel=2e-3)   # symmetry
+    assert np.isfinite(d2).all() and 'flatten' in r0['seconds']
+    # the one-shot wrapper gives the same numbers (and flattens once more)
+    ref, _ = geo.geodesic_distance(V, F, [544], boundary='area', grid=256)
+    np.testing.assert_allclose(d1, ref, rtol=1e-12, atol=1e-12)
+    assert calls == {'flatten': 2, 'rasterise': 2}
+
+
+# ------------------------------------------------------------------------------------------------
+# exact bounds, error against grid size, error estimate and warnings (issue #14)
+def test_clamps_between_euclidean_and_edge_paths():
+    """Coarse grids undershoot the 3D distance and overshoot the edge paths; the clamps must remove
+    both, and the unclamped run must show that there was something to remove."""
+    from scipy.sparse.csgraph import dijkstra
+    V, F = make_surface('edgebump', 33)
+    gs = geo.GeodesicSolver(V, F, boundary='area', grid=64)
+    below = above = 0
+    for s in (0, 500, 1088):
+        E = np.linalg.norm(V - V[s], axis=1)
+        D = dijkstra(gs.graph, indices=s)                     # edge paths (independent of the solver's)
+        raw, _ = gs.distance([s], clamp=False)
+        below += int((raw < E - 1e-12).sum())
+        above += int((raw > D * (1 + 1e-3)).sum())
+        d, rep = gs.distance([s])
+        assert (d >= E - 1e-12).all()
+        assert (d <= D * (1 + 1e-3)).all()
+        assert rep['clamped']['below_euclid'] > 0
+    assert below > 100 and above > 0
+
+
+def corridor(h=0.05):
+    """A flat 8 x 1 strip with a notch [3.9, 4.1] x [0.4, 1] cut in from the top: (V, F) with the unused
+    vertices inside the notch dropped. Exact distances are shortest paths around the notch corners."""
+    nx, ny = int(round(8 / h)) + 1, int(round(1 / h)) + 1
+    X, Y = np.meshgrid(np.arange(nx) * h, np.arange(ny) * h)
+    V = np.c_[X.ravel(), Y.ravel(), np.zeros(nx * ny)]
+    idx = np.arange(nx * ny).reshape(ny, nx)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+    cx = X[:-1, :-1].ravel() + h / 2
+    cy = Y[:-1, :-1].ravel() + h / 2
+    keep = ~((cx > 3.9) & (cx < 4.1) & (cy > 0.4))
+    F = np.r_[np.c_[a, b, c][keep], np.c_[a, c, d][keep]]
+    used, F = np.unique(F, return_inverse=True)
+    return V[used], F.reshape(-1, 3)
+
+
+def corridor_exact(P, s):
+    """Shortest paths in the corridor from point s (2,) to points P (k,2), around the notch corners."""
+    c1, c2 = np.array([3.9, 0.4]), np.array([4.1, 0.4])
+
+    def visible(a, b):                                        # segment a-b misses the notch interior
+        t = np.linspace(0, 1, 801)[:, None, None]
+        q = a[None] + t * (b - a)[None]
+        inside = (q[..., 0] > 3.9 + 1e-9) & (q[..., 0] < 4.1 - 1e-9) & (q[..., 1] > 0.4 + 1e-9)
+        return ~inside.any(0)
+
+    def leg(a, B):                                            # straight legs a -> B (k,2), inf if blocked
+        return np.where(visible(np.broadcast_to(a, B.shape), B), np.linalg.norm(B - a, axis=1), np.inf)
+
+    # shortest paths through the corners (the visibility graph s, c1, c2, x)
+    s1, s2 = leg(s, c1[None])[0], leg(s, c2[None])[0]
+    c12 = np.linalg.norm(c2 - c1)
+    to1, to2 = min(s1, s2 + c12), min(s2, s1 + c12)
+    return np.minimum(leg(s, P), np.minimum(to1 + leg(c1, P), to2 + leg(c2, P)))
+
+
+@pytest.fixture(scope='module')
+def notch():
+    V, F = corridor()
+    s = int(np.argmin(np.linalg.norm(V[:, :2] - [1.0, 0.8], axis=1)))
+    return V, F, s, corridor_exact(V[:, :2], V[s, :2])
+
+
+def test_error_falls_with_grid_size_and_the_estimate_is_honest(notch):
+    V, F, s, D = notch
+    far = np.linalg.norm(V - V[s], axis=1) > 0.05
+    means = []
+    for g in (512, 1024, 2048, 4096):
+        d, rep = geo.geodesic_distance(V, F, [s], uv=V[:, :2], grid=g)
+        mean = (np.abs(d - D)[far] / D[far]).mean()
+        means.append(mean)
+        # the estimate is an honest (conservative) figure for this first-order case
+        est = rep['error_estimate']
+        assert est / 20 <= mean <= est, (g, mean, est)
+    assert means[0] > means[1] > means[2] > means[3], means
+    assert means[3] < 0.3 * means[1]
+    assert means[2] < 1e-3                                    # the 0.1 % target is reached by 2048
+
+
+def test_warnings_when_the_grid_is_too_coarse(notch, tmp_path, capsys, monkeypatch):
+    V, F, s, D = notch
+    d, rep = geo.geodesic_distance(V, F, [s], uv=V[:, :2], grid=128)
+    assert rep['error_estimate'] > geo.ERROR_TARGET
+    assert rep['warnings'] and 'above the target' in rep['warnings'][0]
+    # the automatic grid is chosen for the target: no warning, and the estimate meets it
+    gs = geo.GeodesicSolver(V, F, uv=V[:, :2])
+    d, rep = gs.distance([s])
+    assert rep['error_estimate'] <= geo.ERROR_TARGET and not rep['warnings']
+    assert max(rep['grid']) > 128
+    # a target the capped grid cannot reach: warned, with the cap named (a lower cap keeps this fast)
+    monkeypatch.setattr(geo, 'GRID_AUTO_MAX', 320)
+    d, rep = geo.geodesic_distance(V, F, [s], uv=V[:, :2], error_target=1e-5)
+    assert max(rep['grid']) == 320 and 'capped at 320' in rep['warnings'][0]
+    # the CLI prints the warnings in its JSON report
+    obj = tmp_path / 'c.obj'
+    write_obj(str(obj), V, F)
+    rc = main(['geodesic', str(obj), '--source', str(s), '--grid', '128', '--boundary', 'free',
+               '--out', str(tmp_path / 'd.txt'), '--json'])
+    assert rc == 0
+    import json
+    rep = json.loads(capsys.readouterr().out)
+    assert rep['warnings'] and rep['error_estimate'] > geo.ERROR_TARGET
+
+
+# ------------------------------------------------------------------------------------------------
+# several parts and seams
+def test_two_parts_are_islands_with_infinite_distance_between():
+    V1, F1 = make_surface('bump', 17)
+    V2 = V1 + [10.0, 0.0, 0.0]
+    V = np.vstack([V1, V2])
+    F = np.vstack([F1, F1 + len(V1)])
+    s = 100
+    d, rep = geo.geodesic_distance(V, F, [s], boundary='area', grid=256)
+    assert rep['islands'] == 2 and rep['islands_reached'] == 1
+    assert np.isinf(d[len(V1):]).all() and np.isfinite(d[:len(V1)]).all()
+    assert any('no source' in w for w in rep['warnings'])
+    alone, _ = geo.geodesic_distance(V1, F1, [s], boundary='area', grid=256)
+    np.testing.assert_allclose(d[:len(V1)], alone, rtol=2e-3)
+    # a source on each part: both finite, each part its own distances
+    d2, rep2 = geo.geodesic_distance(V, F, [s, len(V1) + 200], boundary='area', grid=256)
+    assert np.isfinite(d2).all() and rep2['islands_reached'] == 2
+    assert d2[len(V1) + 200] == pytest.approx(0, abs=1e-12)
+
+
+def test_seams_cut_the_surface():
+    """A seam across the flat square splits it into two islands: no distance crosses it."""
+    n = 17
+    V, F = make_surface('flat', n)
+    grid_id = np.arange(n * n).reshape(n, n)
+    col = grid_id[:, 8]                                       # the middle column of vertices
+    full = np.c_[col[:-1], col[1:]]
+    s = int(grid_id[8, 2])
+    d, rep = geo.geodesic_distance(V, F, [s], seams=full, grid=256)
+    assert rep['islands'] == 2
+    side = V[:, 0] < V[col[0], 0] - 1e-9
+    assert np.isfinite(d[side]).all() and np.isinf(d[~side & ~np.isin(np.arange(n * n), col)]).all()
+    # the vertices on the seam have a copy on the source's side: finite, Euclidean there
+    E = np.linalg.norm(V - V[s], axis=1)
+    np.testing.assert_allclose(d[col], E[col], rtol=2e-3)
+    # the cut surface's own distances: vertices on the seam are on the boundary of the source's side
+    assert rep['clamped']['above_edges'] >= 0 and rep['islands_reached'] == 1
+
+
+def test_a_closed_part_needs_seams_or_sphere_mode():
+    from core.surfaces import icosphere
+    V, F = icosphere(2)
+    with pytest.raises(ConformalError) as exc:
+        geo.geodesic_distance(V, F, [0], grid=256)
+    assert exc.value.code == 'no_boundary' and 'sphere' in str(exc.value)

@@ -1,41 +1,54 @@
 """``python -m core geodesic IN.obj --source I [--source J ...] [--grid N] [--boundary MODE] --out DIST.txt``.
 
 Writes one geodesic distance per vertex (input vertex order, mesh units, ``%.9g``) to the nearest of
-the source vertices (0-based indices into the OBJ's ``v`` lines). The file is written only when the
+the source vertices (0-based indices into the OBJ's ``v`` lines); ``inf`` on parts without a source,
+``nan`` for vertices in no face. Warnings (estimated error above the target, parts not reached) are printed
+as ``warning:`` lines after the summary (stdout; stderr is kept for the one error line), or go into the
+JSON report's ``warnings``. The file is written only when the
 whole computation succeeded."""
 import json
 
 import numpy as np
 
 from ..disk.flatten import BOUNDARY_MODES
-from ..geodesic.solver import SOLVERS, geodesic_distance
+from ..geodesic.solver import ERROR_TARGET, SOLVERS, geodesic_distance
 from ..io.obj import read_obj, write_values
 
 
 def add_arguments(p):
-    p.add_argument('input', help='input OBJ (a disk-topology mesh; n-gons are triangulated)')
+    p.add_argument('input', help='input OBJ (disk-topology parts; n-gons are triangulated)')
     p.add_argument('--source', type=int, action='append', required=True, metavar='I',
-                   help='source vertex, 0-based (repeat for several; the result is the distance to the nearest)')
+                   help='source vertex, 0-based (repeat for several; the result is the distance to the '
+                        'nearest)')
     p.add_argument('--out', required=True, help='output text file: one distance per vertex')
     p.add_argument('--grid', type=int, default=None,
-                   help='fast-marching grid nodes along the longer UV side (default: follows the mesh resolution)')
+                   help='fast-marching grid nodes along the longer UV side of each part (default: from '
+                        'the error target and the local resolution)')
     p.add_argument('--boundary', choices=BOUNDARY_MODES, default='uniform',
                    help='boundary mode of the conformal map (default: uniform)')
     p.add_argument('--solver', choices=SOLVERS, default='auto',
                    help='auto (scikit-fmm if installed), skfmm, or sweep (pure numpy)')
-    p.add_argument('--json', action='store_true', help='print the report as JSON')
+    p.add_argument('--error-target', type=float, default=ERROR_TARGET, metavar='E',
+                   help='target for the estimated mean relative error, sets the automatic grid '
+                        f'(default {ERROR_TARGET:g}); a result above it prints a warning')
+    p.add_argument('--json', action='store_true', help='print the report as JSON (warnings in "warnings")')
 
 
 def run(args):
     mesh = read_obj(args.input)
     F, _ = mesh.triangles()
     dist, report = geodesic_distance(mesh.V, F, sources=np.asarray(args.source, np.int64),
-                                     boundary=args.boundary, grid=args.grid, solver=args.solver)
+                                     boundary=args.boundary, grid=args.grid, solver=args.solver,
+                                     error_target=args.error_target)
     write_values(args.out, dist)
     if args.json:
         print(json.dumps(report))
     else:
         ny, nx = report['grid']
-        print(f"geodesic: {len(dist)} vertices, max {np.nanmax(dist):.6g}, grid {nx}x{ny}, "
-              f"solver {report['solver']}, {report['seconds']['total']:.2f} s")
+        fin = dist[np.isfinite(dist)]
+        print(f"geodesic: {len(dist)} vertices, max {fin.max():.6g}, grid {nx}x{ny}, "
+              f"solver {report['solver']}, estimated mean error {100 * report['error_estimate']:.2g}%, "
+              f"{report['seconds']['total']:.2f} s")
+        for w in report['warnings']:
+            print(f"warning: {w}")
     return 0

@@ -114,7 +114,7 @@ def sweep(T0, speed, h, mask=None, order=2, tol=1e-9, max_iter=60, first_iter=1,
         phases = ((1, max_iter if first_iter is None else first_iter), (2, max_iter))
     for o, limit in phases:
         done = 0
-        for done in range(1, limit + 1):
+        for done in range(1, limit + 1):  # noqa: B007  (the count is kept after the loop)
             change = 0.0
             for groups in orders:
                 for idx, nb, f in groups:

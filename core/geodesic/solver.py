@@ -1,27 +1,42 @@
-"""Geodesic distance on a surface by weighted fast marching on its conformal plane (DESIGN.md section 4).
+"""Geodesic distance on a surface by weighted fast marching on its conformal plane (docs/math.md,
+"Geodesic distance on the conformal plane"; the method and its measured accuracy: docs/geodesic.md).
 
 A conformal map scales lengths by ``mu`` (UV units per surface unit) and keeps angles, so a surface length
 element is ``ds = |dx_uv| / mu`` and the geodesic distance ``T`` solves the eikonal equation
 ``|grad_uv T| = 1 / mu`` on the flat UV domain: a travel time with speed ``mu`` on a regular grid.
 
-Steps of ``geodesic_distance``:
+``GeodesicSolver(V, F, ...)`` does the per-mesh work once and keeps it; ``distance(sources)`` answers
+any number of source sets from it. ``geodesic_distance`` is its one-shot wrapper.
 
-1. Flatten (``core.flatten``) unless a UV map is given. Rotate the map to its smallest bounding
-   rectangle (``align_uv``). Compute the realised per-triangle ``mu = sqrt(A_uv / A_3d)`` from the map
-   itself, so any UV scale works, average it to the vertices (area-weighted, in log) and rasterise it
-   with linear interpolation onto a regular grid over the UV bounding box. Nodes outside the domain are
+Set-up (``GeodesicSolver``):
+
+1. Charts. A single connected part without seams is flattened as one disk (``core.disk.flatten``);
+   several parts, or ``seams`` (cuts), go through ``core.atlas.islands.unwrap`` (one flattening per
+   island, unpacked, true scale). A given ``uv`` is split into its connected parts. Distances are
+   measured on the cut surface: infinite between islands.
+2. Per chart: rotate the map to its smallest bounding rectangle (``align_uv``), take the realised
+   per-triangle ``mu = sqrt(A_uv / A_3d)`` (``face_mu``) and the per-vertex ``mu``
+   (``core.mesh.measures.vertex_mu``), choose the grid size for the error target (``choose_grid``),
+   rasterise ``mu`` with linear interpolation onto the grid (``Grid``); nodes outside the domain are
    masked, except a one-node rim with extrapolated ``mu`` so that boundary vertices can be sampled.
-2. Seed each source with exact times in a disk of ``SEED_RADIUS`` cells (smaller where ``mu`` varies
-   fast, ``seed_radius``): ``T = |x - s| * mean(1/mu)`` along the straight segment (Simpson), the flat
-   chart at the source. The seed's rim is the metric circle ``T = tau``; ``calibrate_phi`` sets the
-   level-set values there so that scikit-fmm's first front values are exact. Fast marching then
-   continues from exact data: the point-source offset of fast marching (about 0.3 cells, scikit-fmm
-   issue #22) and the first-order error of its contour start do not arise.
-3. March with scikit-fmm ``travel_time(order=2)`` or, when scikit-fmm is missing, the pure-numpy second
-   order fast sweeping solver of ``core.eikonal`` (the seed and its ring held fixed). Sources whose
-   ``mu`` differ by more than a factor 2 march separately and the minimum is taken.
-4. Sample the travel time back to the vertices bilinearly; vertices inside a seed disk take their chart
-   time directly.
+3. The error estimate of every chart (``error_estimate``) from its local resolution, the grid cell
+   in surface units ``h / mu``, the non-convexity of its domain and the mesh's own floor.
+
+A query (``GeodesicSolver.distance``):
+
+4. Seed each source with exact times in a disk of ``SEED_RADIUS`` cells (smaller where ``mu`` varies
+   fast, ``seed_radius``): the flat-chart time ``|x - s| * mean(1/mu)`` along the straight UV segment,
+   bounded by the 3D Euclidean distance below and the edge-path bound above, and equal to the 3D
+   distance in the triangles around the source (exact there: the geodesic is a straight segment in
+   the triangle). ``calibrate_phi`` sets the level-set values on the seed's rim so that scikit-fmm's
+   first front values are exact (no point-source offset, scikit-fmm issue #22).
+   A seed node takes the chart time only if the straight UV segment stays in the domain (``_visible``).
+5. March with scikit-fmm ``travel_time(order=2)`` or, without scikit-fmm, the numpy fast sweeping
+   solver of ``core.geodesic.eikonal``, without the rim nodes that bridge gaps of the domain
+   (``bridging_rim``; they get extrapolated times, ``extrapolate_rim``). Sources whose ``mu`` differ
+   by more than a factor 2 march separately and the minimum is taken.
+6. Sample the travel time back to the vertices bilinearly, then clamp each vertex between two exact
+   bounds: the 3D distance to the nearest source (below) and the shortest edge path (Dijkstra, above).
 """
 import time
 
@@ -29,45 +44,37 @@ import numpy as np
 
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
+from ..mesh.measures import signed_uv_areas, vertex_mu
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
 MU_MODES = ('vertex', 'face')
 GRID_MIN, GRID_MAX = 64, 4096
+GRID_AUTO_MIN = 256          # the automatic grid never goes below this (nodes along the longer side)
+GRID_AUTO_MAX = 4096         # nor above this; a warning says when the error target needs more
+ERROR_TARGET = 1e-3          # default target for the estimated mean relative error (0.1 %)
 RIM = 1
-# default seed disk radius in cells: the sweep's second-order stencil is less accurate on strongly
-# curved fronts than fast marching's, so it starts from a larger exact disk (see docs/geodesic.md)
-SEED_RADIUS = {'skfmm': 24.0, 'sweep': 36.0}
+# SEED_RADIUS: the default radius of the exact seed disk around a source, in grid cells (one meaning
+# everywhere in core.geodesic). The sweep's second-order stencil is less accurate on strongly curved
+# fronts than fast marching's, so it starts from a larger disk, SWEEP_SEED_RADIUS (docs/geodesic.md).
+SEED_RADIUS = 24.0
+SWEEP_SEED_RADIUS = 36.0
 
 
 # --------------------------------------------------------------------------------------------------
 # conformal factor of a given map
-def face_mu(V, F, uv):
+def face_mu(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Per-triangle scale ``mu_T = sqrt(A_uv / A_3d)`` (m,) of the map ``uv`` (n,2): UV units per
     surface unit, with no normalisation (so it is consistent with the UV coordinates as given).
     Raises ConformalError if a triangle is degenerate or flipped relative to the majority."""
-    W = uv[F]
-    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
-    a = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    a = signed_uv_areas(uv, F)
     A = face_areas(V, F)
     sign = np.sign(np.median(a))
     bad = (a * sign <= 0) | (A <= 0)
     if bad.any():
         raise ConformalError(f"the UV map has {int(bad.sum())} flipped or degenerate triangles: "
                              "geodesic distances need a fold-free map (flatten again, or use "
-                             "boundary 'area' or 'uniform')")
+                             "boundary 'area' or 'uniform')", 'degenerate', 'area_boundary')
     return np.sqrt(np.abs(a) / A)
-
-
-def vertex_mu(V, F, mu_face):
-    """Per-vertex ``mu`` (n,): the 3D-area-weighted geometric mean of the incident triangles' ``mu``."""
-    A = face_areas(V, F)
-    n = len(V)
-    w = np.bincount(F.ravel(), np.repeat(A, 3), minlength=n)
-    s = np.bincount(F.ravel(), np.repeat(A * np.log(mu_face), 3), minlength=n)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        out = np.exp(s / w)
-    out[w <= 0] = 1.0   # unreferenced vertices: never sampled as anything meaningful
-    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -230,43 +237,15 @@ def default_grid(V, F, uv):
     return int(np.clip(64 * np.ceil(g / 64), 256, 2048))
 
 
-# --------------------------------------------------------------------------------------------------
-# sources
-def _source_points(V, F, uv, sources, points):
-    """UV positions (k,2) of the sources: vertex indices ``sources`` and surface points ``points`` =
-    (faces (p,), barycentric (p,3))."""
-    n = len(V)
-    pos = []
-    if sources is not None:
-        s = np.atleast_1d(np.asarray(sources))
-        if s.size:
-            if not np.issubdtype(s.dtype, np.integer):
-                raise ConformalError("source vertices must be integer indices")
-            if s.min() < 0 or s.max() >= n:
-                raise ConformalError(f"source vertex out of range: the mesh has {n} vertices (0..{n - 1})")
-            pos.append(uv[s.astype(np.int64)])
-    if points is not None:
-        pf, pb = points
-        pf = np.atleast_1d(np.asarray(pf, np.int64))
-        pb = np.atleast_2d(np.asarray(pb, np.float64))
-        if pb.shape != (len(pf), 3):
-            raise ConformalError("surface points need one face index and 3 barycentric coordinates each")
-        if len(pf) and (pf.min() < 0 or pf.max() >= len(F)):
-            raise ConformalError(f"source face out of range: the mesh has {len(F)} triangles")
-        if not np.allclose(pb.sum(1), 1.0, atol=1e-6) or (pb < -1e-9).any():
-            raise ConformalError("barycentric coordinates must be non-negative and sum to 1")
-        pos.append(np.einsum('kc,kcd->kd', pb, uv[F[pf]]))
-    if not pos or not sum(len(p) for p in pos):
-        raise ConformalError("no source given: pass at least one source vertex or surface point")
-    return np.concatenate(pos)
 
 
-def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None):
+def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None):
     """Flat-chart times (``_chart_time``, ``inv_mu`` the grid field 1/mu) from the sources ``S`` (k,2,
     node coordinates). With ``pts`` None:
     on the grid, over a window of ``radius_nodes + 2`` around each source, returns (ny, nx) with inf
     outside the windows. With ``pts`` (q,2 node coordinates): at those points (q,), from the nearest
-    source in node units only (others inf)."""
+    source in node units only (others inf). ``domain`` (ny, nx) bool: the inside nodes; segments that
+    leave them give inf (``_visible``)."""
     h = grid.h
     if pts is None:
         w = int(np.ceil(radius_nodes)) + 2
@@ -287,7 +266,7 @@ def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None):
             keep = valid[ii, jj]
             ii, jj, src = ii[keep], jj[keep], src[keep]
             P = np.stack([jj, ii], 1).astype(np.float64)
-            np.minimum.at(out, (ii, jj), _chart_time(inv_mu, valid, Sb[src], P, h))
+            np.minimum.at(out, (ii, jj), _chart_time(inv_mu, valid, Sb[src], P, h, domain))
         return out
     # at arbitrary points: nearest sources by a KD-tree
     from scipy.spatial import cKDTree
@@ -295,17 +274,43 @@ def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None):
     T = np.full(len(pts), np.inf)
     near = d <= radius_nodes + 1
     if near.any():
-        T[near] = _chart_time(inv_mu, valid, S[k[near]], pts[near], h)
+        T[near] = _chart_time(inv_mu, valid, S[k[near]], pts[near], h, domain)
     return T
 
 
-def _chart_time(inv_mu, valid, S, P, h):
+def _chart_time(inv_mu, valid, S, P, h, inside=None):
     """Flat-chart time from ``S`` (k,2) to ``P`` (k,2) (node coordinates): ``|P - S| h`` times the
-    mean of ``1/mu`` along the segment (Simpson's rule on the grid field ``inv_mu`` = 1/mu)."""
+    mean of ``1/mu`` along the segment (Simpson's rule on the grid field ``inv_mu`` = 1/mu). With
+    ``inside`` (ny, nx) bool: inf where the segment leaves the domain (``_visible``), since a straight
+    line across a gap of the domain is no path on the surface."""
     d = np.linalg.norm(P - S, axis=1) * h
     inv = (bilinear(inv_mu, S, valid) + 4 * bilinear(inv_mu, 0.5 * (S + P), valid)
            + bilinear(inv_mu, P, valid)) / 6.0
-    return d * inv
+    T = d * inv
+    if inside is not None:
+        T = np.where(_visible(inside, S, P), T, np.inf)
+    return T
+
+
+def _visible(inside, S, P, skip=0.6, chunk=200_000):
+    """(k,) bool: the segments ``S`` -> ``P`` (k,2 node coordinates) stay on inside nodes: samples every
+    half cell, each at its nearest node, must be ``inside`` (ny, nx), except within ``skip`` cells of
+    either end (an end on the boundary may round to a node just outside)."""
+    ny, nx = inside.shape
+    out = np.ones(len(S), bool)
+    L = np.linalg.norm(P - S, axis=1)
+    if not len(S) or L.max() <= 2 * skip:
+        return out
+    t = np.linspace(0.0, 1.0, int(np.ceil(L.max() / 0.25)) + 1)[1:-1]
+    for a in range(0, len(S), max(1, chunk // max(len(t), 1))):
+        b = a + max(1, chunk // max(len(t), 1))
+        s_, p_, l_ = S[a:b], P[a:b], L[a:b]
+        Q = s_[:, None, :] + t[None, :, None] * (p_ - s_)[:, None, :]          # (c, K, 2)
+        check = (t[None, :] * l_[:, None] > skip) & ((1 - t[None, :]) * l_[:, None] > skip)
+        j = np.clip(np.rint(Q[..., 0]).astype(np.int64), 0, nx - 1)
+        i = np.clip(np.rint(Q[..., 1]).astype(np.int64), 0, ny - 1)
+        out[a:b] = ~(check & ~inside[i, j]).any(1)
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -357,7 +362,7 @@ def calibrate_phi(D, valid, h):
 def resolve_solver(solver):
     """'skfmm' or 'sweep' for a requested ``solver`` ('auto' picks scikit-fmm if it imports)."""
     if solver not in SOLVERS:
-        raise ConformalError(f"unknown solver {solver!r}: use one of {', '.join(SOLVERS)}")
+        raise ConformalError(f"unknown solver {solver!r}: use one of {', '.join(SOLVERS)}", 'invalid_input')
     if solver == 'sweep':
         return solver
     try:
@@ -374,7 +379,7 @@ def solver_name():
     return "scikit-fmm" if resolve_solver('auto') == 'skfmm' else "built-in fast sweeping (no scikit-fmm)"
 
 
-def march(T_seed, seed, phi, speed, mask, h, solver='auto'):
+def eikonal_march(T_seed, seed, phi, speed, mask, h, solver='auto'):
     """Travel times on the grid from the seed nodes (``seed`` (ny, nx) True) whose exact times are
     ``T_seed`` (ny, nx); ``phi`` (ny, nx) is negative exactly on the seed, its zero contour the
     seed's rim. With 'skfmm' the result is the time from that rim (add the rim time); with 'sweep'
@@ -420,126 +425,622 @@ def seed_radius(mu, valid, h, source_radius):
     return float(max(3.0, min(source_radius, cap)))
 
 
+def bridging_rim(G, F, valid):
+    """(ny, nx) bool: the rim nodes (valid, not inside) that link across a gap of the domain: a
+    4-neighbour in use whose triangle shares no vertex with the rim node's own (the triangle it was
+    extended from). Where cells are larger than triangles this also flags some harmless rim nodes;
+    they are then only extrapolated, not marched through. ``G`` a rasterised ``Grid`` with its rim,
+    ``F`` (m,3) the chart's triangles, ``valid`` (ny, nx) the nodes in use."""
+    face = G.face
+    rim = valid & ~G.inside
+    ii, jj = np.nonzero(rim)
+    ny, nx = face.shape
+    bad = np.zeros(len(ii), bool)
+    own = F[face[ii, jj]]                                       # (r,3)
+    for di, dj in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        a, b = ii + di, jj + dj
+        ok = (a >= 0) & (a < ny) & (b >= 0) & (b < nx)
+        a, b = np.where(ok, a, 0), np.where(ok, b, 0)
+        nb_face = face[a, b]
+        use = ok & valid[a, b] & (nb_face >= 0)
+        other = F[np.where(use, nb_face, 0)]
+        share = (own[:, :, None] == other[:, None, :]).any((1, 2))
+        bad |= use & ~share
+    out = np.zeros(face.shape, bool)
+    out[ii[bad], jj[bad]] = True
+    return out
+
+
+def extrapolate_rim(T, inside, rim, h, inv_mu):
+    """Travel times at the rim nodes (outside the domain, next to it) from the inside ones, for
+    sampling boundary vertices: per axis direction with two inside nodes ``2 T1 - T2`` (linear
+    extrapolation, second order), averaged over the directions that have them; else the nearest
+    inside neighbour plus one cell ``T1 + h / mu``. ``T`` (ny, nx) with finite values inside,
+    ``inside``, ``rim`` (ny, nx) bool, ``inv_mu`` (ny, nx) = 1/mu. Returns (ny, nx): ``T`` with the
+    rim filled (inf where no inside neighbour)."""
+    ny, nx = T.shape
+    Tin = np.where(inside, T, np.inf)
+    pad = np.pad(Tin, 2, constant_values=np.inf)
+    ii, jj = np.nonzero(rim)
+    lin_sum = np.zeros(len(ii))
+    lin_cnt = np.zeros(len(ii))
+    step = np.full(len(ii), np.inf)
+    for di, dj in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        t1 = pad[ii + 2 + di, jj + 2 + dj]
+        t2 = pad[ii + 2 + 2 * di, jj + 2 + 2 * dj]
+        both = np.isfinite(t1) & np.isfinite(t2)
+        lin_sum += np.where(both, 2 * np.where(both, t1, 0) - np.where(both, t2, 0), 0.0)
+        lin_cnt += both
+        step = np.minimum(step, t1 + h * inv_mu[ii, jj])
+    out = T.copy()
+    with np.errstate(invalid='ignore', divide='ignore'):
+        lin = np.where(lin_cnt > 0, lin_sum / np.maximum(lin_cnt, 1), np.inf)
+    out[ii, jj] = np.where(lin_cnt > 0, np.minimum(lin, step), step)
+    return out
+
+
+
 def _groups(mu_s):
     """Split sources into groups whose ``mu`` differ by less than a factor 2 (one march each)."""
     b = np.floor(np.log2(mu_s / mu_s.min()) + 1e-12).astype(np.int64)
     return [np.flatnonzero(b == k) for k in np.unique(b)]
 
 
-def geodesic_distance(V, F, sources=None, points=None, uv=None, boundary='uniform', grid=None,
-                      solver='auto', mu_mode='vertex', source_radius=None, calibrate=True, progress=None):
-    """Geodesic distances from a set of sources to every vertex, by fast marching on the conformal plane.
 
-    V (n,3) float, F (m,3) int triangles (a disk). ``sources``: vertex indices (k,) and/or ``points``:
-    surface points as (faces (p,), barycentric (p,3)). With several sources the result is the distance
-    to the nearest. ``uv`` (n,2): a fold-free conformal map to reuse (any scale); None flattens with
-    ``boundary`` ('uniform', 'area' or 'free'). ``grid``: nodes along the longer UV side (None:
-    ``default_grid``). ``solver``: 'auto' (scikit-fmm if installed, else the numpy sweep), 'skfmm' or
-    'sweep'. ``mu_mode``: 'vertex' (per-vertex mu interpolated linearly, default) or 'face' (per
-    triangle, piecewise constant). ``source_radius``: radius of the exact seed disk in grid cells
-    (None: ``SEED_RADIUS`` of the solver; ``seed_radius`` may reduce it). ``calibrate``: make scikit-fmm's start values on the seed rim
-    exact (``calibrate_phi``). ``progress(fraction, message)``: optional callback.
 
-    Returns ``(dist, report)``: ``dist`` (n,) float64 in mesh units (vertices on no triangle get NaN);
-    ``report`` dict: grid [ny, nx], cell (UV units), masked_fraction, solver, sources, seed_radius
-    (cells), marches, seconds {flatten, rasterise, solve, sample, total}."""
-    say = progress or (lambda f, msg: None)
-    t0 = time.perf_counter()
+# --------------------------------------------------------------------------------------------------
+# accuracy model: error estimate from the local resolution, and the grid size for an error target
+# Fitted on exact polyhedral distances (MMP) and exact corridor distances: docs/geodesic.md "Error
+# estimate", bench/geodesic_real.py --calibrate. Two terms: (1) the grid, first order in the cell where
+# geodesics bend round reflex boundary corners (a convex domain is far more accurate), measured C = 0.03-
+# 0.05 on a corridor with two reflex corners (reflex 1), 0.2 on woody (3.6), 0.16-0.35 on alligator (22);
+# (2) a floor set by the mesh, which no grid removes: the per-vertex mu interpolated over a triangle is
+# not the triangle's own mu (measured floor / spread = 0.010 edgebump, 0.022 ridge, 0.031 bump and waves,
+# 0.096 spot's largest island; 0.1 keeps the estimate conservative).
+ERR_GRID_C0 = 0.02     # grid term: (C0 + C1 min(reflex, REFLEX_CAP)) * mean surface cell / median distance
+ERR_GRID_C1 = 0.05
+REFLEX_CAP = 6.0
+ERR_MESH = 0.1         # mesh term: ERR_MESH * mu_spread (area-weighted mean of the per-triangle spread)
+TYPICAL_DISTANCE = 0.35  # before a query, the median distance is taken as this times the 3D bbox diagonal
+NODE_BUDGET = 4096 * 4096  # automatic grids of all islands together use at most this many nodes
+
+
+def reflex_turning(uv: np.ndarray, F: np.ndarray) -> float:
+    """How non-convex a UV domain is: the sum over its boundary vertices of the interior angle beyond
+    pi (the UV corner angles around the vertex, minus pi, where positive), divided by pi. ``uv``
+    (k,2), ``F`` (m,3). 0 for a convex domain, 1 for two right-angled reflex corners; holes count."""
+    from ..mesh.geometry import corner_angles
+    from ..mesh.topology import boundary_loops
+    loops = boundary_loops(F, len(uv))
+    if not loops:
+        return 0.0
+    ang = corner_angles(np.c_[uv, np.zeros(len(uv))], F)
+    total = np.bincount(F.ravel(), ang.ravel(), minlength=len(uv))
+    b = np.concatenate([np.asarray(L, np.int64) for L in loops])
+    return float(np.clip(total[b] - np.pi, 0.0, None).sum() / np.pi)
+
+
+def mu_spread(F: np.ndarray, mu_face: np.ndarray, area: np.ndarray) -> float:
+    """How far the smooth (per-vertex, ``core.mesh.measures.vertex_mu``) conformal factor departs from
+    the mesh's own per-triangle one: the ``area``-weighted mean over the triangles ``F`` (m,3) of the
+    largest ``|log mu_vertex - log mu_T|`` at their corners (dimensionless). ``mu_face`` (m,)."""
+    lv = np.log(vertex_mu(F, mu_face, area, int(F.max()) + 1))
+    s = np.abs(lv[F] - np.log(mu_face)[:, None]).max(1)
+    return float((area * s).sum() / area.sum())
+
+
+def surface_cell(mu_face: np.ndarray, area: np.ndarray, h: float) -> float:
+    """The grid's mean cell size in surface units (mesh units): the area-weighted (``area`` (m,)) mean
+    over the triangles of ``h / mu_T`` for a grid spacing ``h`` (UV units) and the realised scale
+    ``mu_face`` (m,) (UV units per surface unit)."""
+    return float((area * (h / mu_face)).sum() / area.sum())
+
+
+def grid_coefficient(reflex: float) -> float:
+    """The grid term's coefficient for a domain of ``reflex_turning`` ``reflex``."""
+    return ERR_GRID_C0 + ERR_GRID_C1 * min(reflex, REFLEX_CAP)
+
+
+def error_estimate(cell: float, distance: float, spread: float, reflex: float) -> float:
+    """Estimated mean relative error (dimensionless) of the distances on a chart whose mean surface
+    cell is ``cell`` (``surface_cell``, mesh units), for a query whose median distance is ``distance``
+    (mesh units), on a map with ``mu_spread`` ``spread`` over a domain with ``reflex_turning``
+    ``reflex``: ``grid_coefficient(reflex) * cell / distance + ERR_MESH * spread``."""
+    return float(grid_coefficient(reflex) * cell / max(distance, 1e-300) + ERR_MESH * spread)
+
+
+def typical_distance(V: np.ndarray) -> float:
+    """The median distance assumed before a query (mesh units): ``TYPICAL_DISTANCE`` times the
+    diagonal of the bounding box of the points ``V`` (k,3)."""
+    return float(TYPICAL_DISTANCE * np.linalg.norm(np.ptp(V, axis=0)))
+
+
+def default_grid_for_target(V, F, uv, mu_face, spread, reflex, target=ERROR_TARGET, pad=2):
+    """Automatic grid size (nodes along the longer UV side) for one chart, ``V`` (k,3), ``F`` (mi,3),
+    ``uv`` (k,2), ``mu_face`` (mi,): the smallest multiple of 64 whose ``error_estimate`` (at the
+    ``typical_distance``) meets ``target``, at least ``default_grid`` (8 nodes per mean UV edge) and
+    ``GRID_AUTO_MIN``, at most ``GRID_AUTO_MAX``. When the mesh term alone uses up the target, the grid
+    term is only brought to half the mesh term (a finer grid would not help). Returns (grid, limit):
+    ``limit`` None when the target is met, 'cap' when the cap stops it, 'mesh' when the mesh does."""
+    area = face_areas(V, F)
+    ext = float(np.ptp(uv[np.unique(F)], axis=0).max())
+    base = max(default_grid(V, F, uv), GRID_AUTO_MIN)
+    floor = ERR_MESH * spread
+    room, limit = target - floor, None
+    if room < 0.5 * floor:
+        room, limit = 0.5 * floor, 'mesh'
+    # cell(grid) = cell_unit / (grid - 1 - 2 pad), as the Grid's spacing
+    cell_unit = surface_cell(mu_face, area, ext)
+    g = 1 + 2 * pad + grid_coefficient(reflex) * cell_unit / (max(room, 1e-12) * typical_distance(V))
+    g = int(64 * np.ceil(max(g, base) / 64))
+    if g > GRID_AUTO_MAX:
+        return GRID_AUTO_MAX, limit or 'cap'
+    return g, limit
+
+
+# --------------------------------------------------------------------------------------------------
+# charts: one flat grid per island
+class Chart:
+    """One island's flat chart and its rasterised ``mu``, kept for any number of queries.
+
+    ``verts`` (k,) the split vertices of the island (indices into the solver's split arrays);
+    ``V`` (k,3) their positions; ``F`` (mi,3) the island's triangles in local indices; ``faces`` (mi,)
+    their indices in the input ``F``; ``uv`` (k,2) the map, rotated to its smallest bounding
+    rectangle; ``mu_face`` (mi,) realised per-triangle scale; ``spread`` (``mu_spread``), ``reflex``
+    (``reflex_turning``); ``size`` the grid size and ``limit`` (None, 'cap', 'mesh' or 'budget': what
+    kept the automatic grid from the target). After ``rasterise``: ``grid`` (``Grid``) with ``mu``,
+    ``inv_mu``, ``valid`` and ``march_on`` (ny, nx); ``P`` (k,2) node coordinates of the vertices;
+    ``cell`` the mean grid cell in surface units; ``error_estimate`` (mean relative, at the typical
+    distance; a query re-estimates it from its own distances)."""
+
+    def __init__(self, V, F, uv, verts, faces, grid, target):
+        self.verts, self.faces, self.V, self.F = verts, faces, V, F
+        self.uv = uv = align_uv(uv)
+        self.mu_face = mu_f = face_mu(V, F, uv)
+        self.area = face_areas(V, F)
+        self.spread = mu_spread(F, mu_f, self.area)
+        self.reflex = reflex_turning(uv, F)
+        self.limit = None
+        if grid is None:
+            grid, self.limit = default_grid_for_target(V, F, uv, mu_f, self.spread, self.reflex, target)
+        self.size = int(grid)
+        ext = np.ptp(uv, axis=0)
+        self.nodes = float(self.size) ** 2 * float(ext.min() / ext.max())       # about, for the budget
+
+    def rasterise(self, mu_mode):
+        """Build the grid of ``size`` nodes and the fields on it (see the class docstring)."""
+        uv, F, mu_f = self.uv, self.F, self.mu_face
+        G = Grid(uv, self.size).rasterise(uv, F)
+        self.valid = valid = G.rim(RIM)
+        if mu_mode == 'vertex':
+            mu = G.interpolate(uv, F, vertex_mu(F, mu_f, self.area, len(self.V)))
+        else:
+            mu = G.interpolate(uv, F, face_values=mu_f)
+        self.mu = np.where(valid, np.clip(mu, mu_f.min(), mu_f.max()), 1.0)
+        self.march_on = valid & ~bridging_rim(G, F, valid)
+        self.inv_mu = 1.0 / self.mu
+        self.grid = G
+        self.P = G.coords(uv)
+        self.cell = surface_cell(mu_f, self.area, G.h)
+        self.error_estimate = error_estimate(self.cell, typical_distance(self.V), self.spread, self.reflex)
+        return self
+
+    def node_points(self, ii, jj):
+        """3D positions (q,3) of grid nodes (``ii``, ``jj``) (q,), each in the plane of its triangle
+        (``grid.face``; rim nodes extrapolate their neighbour's), and that triangle (q,)."""
+        f = self.grid.face[ii, jj]
+        W = self.P[self.F[f]]                                  # (q,3,2) node coordinates
+        e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+        det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        dx, dy = jj - W[:, 0, 0], ii - W[:, 0, 1]
+        b1 = (dx * e2[:, 1] - dy * e2[:, 0]) / det
+        b2 = (e1[:, 0] * dy - e1[:, 1] * dx) / det
+        X = self.V[self.F[f]]
+        return X[:, 0] + b1[:, None] * (X[:, 1] - X[:, 0]) + b2[:, None] * (X[:, 2] - X[:, 0]), f
+
+
+# --------------------------------------------------------------------------------------------------
+def _check_mesh_arrays(V, F):
     V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64)
     if V.ndim != 2 or V.shape[1] != 3 or F.ndim != 2 or F.shape[1] != 3 or not len(F):
-        raise ConformalError("expected V (n,3) positions and F (m,3) triangles")
+        raise ConformalError("expected V (n,3) positions and F (m,3) triangles", 'invalid_input')
     if F.min() < 0 or F.max() >= len(V):
-        raise ConformalError("a triangle refers to a vertex that does not exist")
-    if mu_mode not in MU_MODES:
-        raise ConformalError(f"unknown mu_mode {mu_mode!r}: use one of {', '.join(MU_MODES)}")
-    solver = resolve_solver(solver)
-    if source_radius is None:
-        source_radius = SEED_RADIUS[solver]
-    if not source_radius >= 1.0:
-        raise ConformalError("source_radius must be at least 1 grid cell")
-    _source_points(V, F, np.zeros((len(V), 2)), sources, points)      # validate before any work
-    report = {}
-    seconds = {}
-    if uv is None:
-        from ..disk.flatten import flatten
-        say(0.0, 'flattening')
-        res = flatten(V, F, boundary=boundary, fit='true_scale', bound=False)
-        uv = res.uv
-        report['boundary'] = boundary
-        report['mu_ratio'] = res.report.get('mu_ratio')
-        seconds['flatten'] = time.perf_counter() - t0
-    else:
-        uv = np.asarray(uv, np.float64)
-        if uv.shape != (len(V), 2) or not np.isfinite(uv).all():
-            raise ConformalError(f"uv must be ({len(V)},2) finite coordinates, got shape {uv.shape}")
-        report['boundary'] = 'given'
-    say(0.3, 'rasterising')
-    t = time.perf_counter()
-    on_mesh = np.zeros(len(V), bool)
-    on_mesh[F.ravel()] = True
-    uv = align_uv(uv, on_mesh)
-    S_uv = _source_points(V, F, uv, sources, points)
-    mu_f = face_mu(V, F, uv)
-    if grid is None:
-        grid = default_grid(V, F, uv)
-    G = Grid(uv[on_mesh], grid).rasterise(uv, F)
-    valid = G.rim(RIM)
-    if mu_mode == 'vertex':
-        mu = G.interpolate(uv, F, vertex_mu(V, F, mu_f))
-    else:
-        mu = G.interpolate(uv, F, face_values=mu_f)
-    mu = np.where(valid, np.clip(mu, mu_f.min(), mu_f.max()), 1.0)
-    seconds['rasterise'] = time.perf_counter() - t
-    t = time.perf_counter()
-    S = G.coords(S_uv)
-    mu_s = bilinear(mu, S, valid)
-    if not np.isfinite(mu_s).all():
-        raise ConformalError("a source lies outside the flattened domain")
-    radius = seed_radius(mu, valid, G.h, source_radius)
-    inv_mu = 1.0 / mu
-    P = G.coords(uv)
-    T = np.full(G.shape, np.inf)
-    near = np.full(len(V), np.inf)
-    used = None
-    groups = _groups(mu_s)
-    for g, idx in enumerate(groups):
-        say(0.4 + 0.5 * g / len(groups), 'marching')
-        # exact chart times in the seed disk T < tau (radius >= `radius` cells for every source)
-        tau = radius * G.h / float(mu_s[idx].min())
-        reach = radius * float(mu_s[idx].max() / mu_s[idx].min())
-        Tloc = _local_times(G, inv_mu, valid, S[idx], reach)
-        # signed distance to the seed rim, in UV units at each node's own speed
-        h_far = 4.0 * G.h
-        phi = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * mu, h_far)
-        phi = np.minimum(phi, h_far)
-        seed = phi < 0
-        if not seed.any():
-            raise ConformalError("the source seed covers no grid node: increase the grid size")
-        if calibrate:
-            phi = calibrate_phi(phi, valid, G.h)
-        Tm, used = march(Tloc, seed, phi, mu, ~valid, G.h, solver)
-        Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else Tm
-        np.minimum(T, Tg, out=T)
-        # vertices inside a seed disk take their exact chart time
-        nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=P)
-        near = np.where(nv <= tau, np.fmin(near, nv), near)
-    T[~valid] = np.inf
-    seconds['solve'] = time.perf_counter() - t
-    t = time.perf_counter()
-    dist = bilinear(np.where(valid, T, np.nan), P, valid)
-    dist = np.fmin(dist, near)
-    dist[~on_mesh] = np.nan
-    bad = int((~np.isfinite(dist[on_mesh])).sum())
-    if bad:
-        raise ConformalError(f"{bad} vertices were not reached by the front: the UV domain is not "
-                             "connected at this grid size; increase the grid")
-    seconds['sample'] = time.perf_counter() - t
-    seconds['total'] = time.perf_counter() - t0
-    ny, nx = G.shape
-    report.update({
-        'grid': [ny, nx], 'cell': G.h, 'masked_fraction': float(1 - G.inside.mean()),
-        'solver': used, 'mu_mode': mu_mode, 'sources': int(len(S_uv)), 'seed_radius': radius,
-        'marches': len(groups), 'seconds': {k: round(v, 4) for k, v in seconds.items()},
-    })
-    return dist, report
+        raise ConformalError("a triangle refers to a vertex that does not exist", 'invalid_input')
+    if not np.isfinite(V[np.unique(F)]).all():
+        raise ConformalError("some vertex coordinates are NaN or infinite", 'bad_coordinates',
+                             'fix_coordinates')
+    return V, F
+
+
+def _parse_sources(n, m, sources, points):
+    """Validated vertex sources (k,) int64 and surface points (faces (p,) int64, barycentric (p,3))."""
+    s = np.zeros(0, np.int64)
+    if sources is not None:
+        s = np.atleast_1d(np.asarray(sources))
+        if s.size:
+            if not np.issubdtype(s.dtype, np.integer):
+                raise ConformalError("source vertices must be integer indices")
+            if s.min() < 0 or s.max() >= n:
+                raise ConformalError(f"source vertex out of range: the mesh has {n} vertices (0..{n - 1})")
+        s = s.astype(np.int64).ravel()
+    pf, pb = np.zeros(0, np.int64), np.zeros((0, 3))
+    if points is not None:
+        pf = np.atleast_1d(np.asarray(points[0], np.int64))
+        pb = np.atleast_2d(np.asarray(points[1], np.float64))
+        if pb.shape != (len(pf), 3):
+            raise ConformalError("surface points need one face index and 3 barycentric coordinates each")
+        if len(pf) and (pf.min() < 0 or pf.max() >= m):
+            raise ConformalError(f"source face out of range: the mesh has {m} triangles")
+        if not np.allclose(pb.sum(1), 1.0, atol=1e-6) or (pb < -1e-9).any():
+            raise ConformalError("barycentric coordinates must be non-negative and sum to 1")
+    if not len(s) and not len(pf):
+        raise ConformalError("no source given: pass at least one source vertex or surface point")
+    return s, pf, pb
+
+
+class GeodesicSolver:
+    """Geodesic distances on one mesh from any sources: flattening, grids and rasterised ``mu`` are
+    computed once here and reused by every ``distance`` call.
+
+    V (n,3) float, F (m,3) int triangles. ``uv`` (n,2): a fold-free conformal map to reuse (any scale;
+    each connected part is its own chart); None flattens: a single part without ``seams`` with
+    ``core.disk.flatten`` (``boundary`` 'uniform', 'area' or 'free'), else (several parts, seams,
+    holes, loose vertices) every island of ``core.atlas.islands.unwrap`` (holes filled virtually;
+    ``seams`` (k,2) vertex pairs cut the surface; distances are measured
+    on the cut surface). Distances between islands are infinite. A closed island has no flat chart:
+    use sphere mode (``core.sphere.geodesic``) or mark seams. ``grid``: nodes along the longer UV
+    side of every chart (64..4096), None: per chart from ``error_target`` (``default_grid_for_target``).
+    ``solver``: 'auto' (scikit-fmm if installed, else the numpy sweep), 'skfmm' or 'sweep'.
+    ``mu_mode``: 'vertex' (per-vertex mu interpolated linearly, default) or 'face' (piecewise
+    constant). ``error_target``: the estimated mean relative error to reach (default 1e-3); a chart
+    whose estimate stays above it gets a warning in every report. ``progress(fraction, message)``:
+    optional callback. Raises ``ConformalError``.
+
+    Attributes: ``charts`` (list of ``Chart``), ``vert_of`` (N,) input vertex of each split vertex,
+    ``face_island`` (m,), ``report`` (dict: set-up figures, including ``seconds`` {flatten,
+    rasterise})."""
+
+    def __init__(self, V: np.ndarray, F: np.ndarray, uv: np.ndarray | None = None, boundary: str = 'uniform',
+                 grid: int | None = None, solver: str = 'auto', mu_mode: str = 'vertex',
+                 seams: np.ndarray | None = None, error_target: float = ERROR_TARGET, progress=None):
+        say = progress or (lambda f, msg: None)
+        t0 = time.perf_counter()
+        V, F = _check_mesh_arrays(V, F)
+        if mu_mode not in MU_MODES:
+            raise ConformalError(f"unknown mu_mode {mu_mode!r}: use one of {', '.join(MU_MODES)}")
+        if not (np.isfinite(error_target) and error_target > 0):
+            raise ConformalError(f"error_target must be a positive fraction, got {error_target}")
+        if grid is not None and not GRID_MIN <= int(grid) <= GRID_MAX:
+            raise ConformalError(f"grid size {grid} is out of range: use {GRID_MIN}..{GRID_MAX} nodes")
+        self.solver = resolve_solver(solver)
+        self.mu_mode, self.error_target = mu_mode, float(error_target)
+        self.n, self.m = len(V), len(F)
+        self.V, self.F = V, F
+        self.on_mesh = np.zeros(self.n, bool)
+        self.on_mesh[F.ravel()] = True
+        report = {'mu_mode': mu_mode, 'error_target': self.error_target}
+        seconds = {}
+        if uv is not None:
+            if seams is not None:
+                raise ConformalError("seams need the solver to flatten: pass uv=None with seams")
+            uv = np.asarray(uv, np.float64)
+            if uv.shape != (self.n, 2) or not np.isfinite(uv[self.on_mesh]).all():
+                raise ConformalError(f"uv must be ({self.n},2) finite coordinates, got shape {uv.shape}")
+            from ..mesh.topology import face_components
+            count, face_island = face_components(F, self.n)
+            vert_of, Fs, uvs = np.arange(self.n), F, uv
+            report['boundary'] = 'given'
+        else:
+            from ..mesh.topology import face_components
+            count, face_island = face_components(F, self.n)
+            say(0.0, 'flattening')
+            from ..mesh.topology import boundary_loops
+            if count == 1 and seams is None and self.on_mesh.all() and len(boundary_loops(F, self.n)) == 1:
+                from ..disk.flatten import flatten
+                res = flatten(V, F, boundary=boundary, fit='true_scale', bound=False)
+                vert_of, Fs, uvs = np.arange(self.n), F, res.uv
+                report['mu_ratio'] = res.report.get('mu_ratio')
+            else:
+                from ..atlas.islands import unwrap
+                res = unwrap(V, F, seams=seams, boundary=boundary, fit='true_scale', pack=False,
+                             allow_loose=True)
+                vert_of, Fs, uvs = res.vert_of, res.F, res.uv
+                face_island = res.face_island
+                count = int(face_island.max()) + 1
+            report['boundary'] = boundary
+            seconds['flatten'] = time.perf_counter() - t0
+        say(0.3, 'rasterising')
+        t = time.perf_counter()
+        self.vert_of, self.Fs = np.asarray(vert_of, np.int64), np.asarray(Fs, np.int64)
+        self.face_island = np.asarray(face_island, np.int64)
+        Vs = V[self.vert_of]
+        self.Vs = Vs
+        N = len(self.vert_of)
+        self.chart_of_split = np.full(N, -1, np.int64)
+        self.local_of_split = np.full(N, -1, np.int64)
+        self.charts = []
+        order = np.argsort(face_island, kind='stable')
+        cuts = np.flatnonzero(np.diff(face_island[order])) + 1
+        for c, faces in enumerate(np.split(order, cuts)):
+            Fg = self.Fs[faces]
+            verts, Fl = np.unique(Fg, return_inverse=True)
+            Fl = Fl.reshape(-1, 3)
+            try:
+                ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, self.error_target)
+            except ConformalError as exc:
+                raise (exc.with_context(f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles)")
+                       if len(cuts) else exc) from None
+            self.chart_of_split[verts] = c
+            self.local_of_split[verts] = np.arange(len(verts))
+            self.charts.append(ch)
+        if grid is None:                        # automatic grids: all islands within the node budget
+            total = sum(ch.nodes for ch in self.charts)
+            if total > NODE_BUDGET:
+                k = np.sqrt(NODE_BUDGET / total)
+                for ch in self.charts:
+                    ch.size = int(max(GRID_MIN, 64 * np.floor(ch.size * k / 64)))
+                    ch.limit = ch.limit or 'budget'
+        for ch in self.charts:
+            ch.rasterise(mu_mode)
+        # the edge graph of the cut surface, for the upper bound (Dijkstra)
+        import scipy.sparse as sp
+        E = np.concatenate([self.Fs[:, [0, 1]], self.Fs[:, [1, 2]], self.Fs[:, [2, 0]]])
+        w = np.linalg.norm(Vs[E[:, 0]] - Vs[E[:, 1]], axis=1)
+        w = np.maximum(w, 1e-300)                              # csgraph drops explicit zeros
+        self.graph = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
+                                   shape=(N, N)).tocsr()
+        seconds['rasterise'] = time.perf_counter() - t
+        self.report = report
+        self.seconds = seconds
+
+    # ----------------------------------------------------------------------------------------------
+    def _warning(self, chart, est):
+        """The warning for ``chart`` (index) whose estimate ``est`` is above the target, or None."""
+        if est <= self.error_target:
+            return None
+        ch = self.charts[chart]
+        where = f" on island {chart + 1} of {len(self.charts)}" if len(self.charts) > 1 else ""
+        msg = (f"estimated mean error {100 * est:.3g}%{where} is above the target "
+               f"{100 * self.error_target:.3g}% (grid {ch.size}")
+        if ch.limit == 'mesh' or ERR_MESH * ch.spread > 0.5 * self.error_target:
+            return msg + (f"; the mesh alone accounts for {100 * ERR_MESH * ch.spread:.2g}%: its conformal "
+                          "factor varies too much across triangles): subdivide the mesh, or use a more "
+                          "uniform map (boundary 'uniform')")
+        if ch.limit == 'cap':
+            msg += f", the automatic grid is capped at {GRID_AUTO_MAX}"
+        elif ch.limit == 'budget':
+            msg += f", the islands' automatic grids share a budget of {NODE_BUDGET:,} nodes"
+        return msg + "): use a larger grid, or a more uniform map (boundary 'uniform')"
+
+    def _upper_bound(self, src_split, pf, pb):
+        """Shortest edge-path lengths (N,) on the cut surface from the split source vertices and the
+        surface points (faces ``pf``, barycentric ``pb``): an upper bound of the geodesic distance."""
+        from scipy.sparse.csgraph import dijkstra
+        G = self.graph
+        N = G.shape[0]
+        if len(pf):
+            import scipy.sparse as sp
+            k = len(pf)
+            corners = self.Fs[pf]                                            # (k,3)
+            X = np.einsum('kc,kcd->kd', pb, self.Vs[corners])
+            w = np.maximum(np.linalg.norm(self.Vs[corners] - X[:, None], axis=2), 1e-300)
+            rows = np.repeat(N + np.arange(k), 3)
+            A = sp.coo_matrix((w.ravel(), (rows, corners.ravel())), shape=(N + k, N + k))
+            G = (sp.block_diag([G, sp.csr_matrix((k, k))]) + A).tocsr()
+            idx = np.r_[src_split, N + np.arange(k)]
+        else:
+            idx = src_split
+        return dijkstra(G, directed=True, indices=idx, min_only=True)[:N]
+
+    def distance(self, sources=None, points=None, source_radius: float | None = None, calibrate: bool = True,
+                 clamp: bool = True, progress=None) -> tuple[np.ndarray, dict]:
+        """Geodesic distances (n,) from the nearest source, in mesh units.
+
+        ``sources``: vertex indices (k,); ``points``: surface points as (faces (p,), barycentric
+        (p,3)); at least one in all. ``source_radius``: exact seed disk radius in grid cells (None:
+        ``SEED_RADIUS``, or ``SWEEP_SEED_RADIUS`` for the sweep; ``seed_radius`` may reduce it).
+        ``calibrate``: exact scikit-fmm start values on the seed rim (``calibrate_phi``). ``clamp``:
+        bound every vertex by the 3D distance below and the edge-path distance above.
+
+        Returns ``(dist, report)``: ``dist`` (n,) float64: NaN at vertices in no triangle, inf on
+        islands without a source. ``report``: grid [ny, nx] (the largest chart), cell (UV units),
+        masked_fraction, solver, sources, seed_radius (cells), marches, islands, islands_reached,
+        error_estimate (mean relative, dimensionless), error_target, clamped {below_euclid,
+        above_edges} (vertex counts), filled_from_edges (vertices no grid node reached, given edge
+        paths from their neighbours), warnings (list of str), seconds {rasterise, solve, sample,
+        total} and, for the set-up, flatten. Raises ``ConformalError``."""
+        say = progress or (lambda f, msg: None)
+        t0 = time.perf_counter()
+        if source_radius is None:
+            source_radius = SEED_RADIUS if self.solver == 'skfmm' else SWEEP_SEED_RADIUS
+        if not source_radius >= 1.0:
+            raise ConformalError("source_radius must be at least 1 grid cell")
+        s, pf, pb = _parse_sources(self.n, self.m, sources, points)
+        if len(s) and not self.on_mesh[s].all():
+            raise ConformalError(f"source vertex {int(s[~self.on_mesh[s]][0])} is in no triangle")
+        is_src = np.isin(self.vert_of, s)                       # split copies of the source vertices
+        src_split = np.flatnonzero(is_src)
+        # 3D positions of all sources (vertices and points) for the Euclidean bound
+        X_src = np.concatenate([self.V[s], np.einsum('kc,kcd->kd', pb, self.Vs[self.Fs[pf]])])
+        from scipy.spatial import cKDTree
+        tree = cKDTree(X_src)
+        upper = self._upper_bound(src_split, pf, pb) if clamp else None
+        N = len(self.vert_of)
+        dist_s = np.full(N, np.inf)
+        marches, radii, reached = 0, [], 0
+        active = np.unique(np.r_[self.chart_of_split[src_split], self.face_island[pf]]).astype(np.int64)
+        for k, c in enumerate(active):
+            say(0.05 + 0.85 * k / len(active), 'marching')
+            ch = self.charts[c]
+            loc = self.local_of_split[src_split[self.chart_of_split[src_split] == c]]
+            mine = self.face_island[pf] == c
+            S_uv = np.concatenate([ch.uv[loc], np.einsum('kc,kcd->kd', pb[mine], ch.uv[ch.F[np.searchsorted(
+                ch.faces, pf[mine])]])]) if mine.any() else ch.uv[loc]
+            src_faces = np.searchsorted(ch.faces, pf[mine]) if mine.any() else np.zeros(0, np.int64)
+            d, r, nm = self._march_chart(ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius,
+                                         calibrate)
+            dist_s[ch.verts] = d
+            marches += nm
+            radii.append(r)
+            reached += 1
+        t = time.perf_counter()
+        filled = self._fill_unreached(dist_s, active)
+        clamped = {'below_euclid': 0, 'above_edges': 0}
+        if clamp:
+            E, _ = tree.query(self.Vs)
+            fin = np.isfinite(dist_s)
+            low = fin & (dist_s < E)
+            high = fin & (dist_s > upper)
+            clamped = {'below_euclid': int(low.sum()), 'above_edges': int(high.sum())}
+            dist_s = np.where(low, E, dist_s)
+            dist_s = np.where(high, upper, dist_s)
+        dist = np.full(self.n, np.inf)
+        np.minimum.at(dist, self.vert_of, dist_s)
+        dist[~self.on_mesh] = np.nan
+        t_sample = time.perf_counter() - t
+        G = max((self.charts[c] for c in active), key=lambda ch: ch.size)
+        ny, nx = G.grid.shape
+        # the error estimate of each reached chart, at the median distance of this query
+        ests = []
+        for c in active:
+            ch = self.charts[c]
+            dc = dist_s[ch.verts]
+            dc = dc[np.isfinite(dc) & (dc > 0)]
+            ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.spread,
+                                       ch.reflex))
+        est = max(ests)
+        warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w]
+        if filled:
+            warnings.append(f"{filled} vertices lie in UV slivers thinner than a grid cell: their distances "
+                            "are edge paths from their neighbours (an upper bound); use a larger grid")
+        if len(active) < len(self.charts):
+            warnings.append(f"{len(self.charts) - len(active)} of {len(self.charts)} islands have no source: "
+                            "their distances are infinite (distances do not cross between islands)")
+        total = time.perf_counter() - t0
+        seconds = dict(self.seconds)
+        seconds.update({'solve': total - t_sample, 'sample': t_sample,
+                        'total': total + sum(self.seconds.values())})
+        report = dict(self.report)
+        report.update({
+            'grid': [ny, nx], 'cell': G.grid.h, 'masked_fraction': float(1 - G.grid.inside.mean()),
+            'solver': self.solver, 'sources': int(len(X_src)), 'seed_radius': float(min(radii)),
+            'marches': marches, 'islands': len(self.charts), 'islands_reached': reached,
+            'error_estimate': est, 'clamped': clamped, 'filled_from_edges': filled, 'warnings': warnings,
+            'seconds': {k: round(v, 4) for k, v in seconds.items()},
+        })
+        return dist, report
+
+    def _march_chart(self, ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius, calibrate):
+        """Distances (k,) at one chart's vertices from the sources on it: ``S_uv`` (q,2) their UV
+        positions (vertex sources ``loc`` (a,) local indices first, then the surface points in local
+        faces ``src_faces`` (b,)). Returns (dist (k,), seed radius in cells, number of marches)."""
+        G, mu, valid, inv_mu = ch.grid, ch.mu, ch.valid, ch.inv_mu
+        march_on = ch.march_on                      # inside nodes and the rim nodes that bridge no gap
+        rim = valid & ~march_on
+        S = G.coords(S_uv)
+        mu_s = bilinear(mu, S, valid)
+        if not np.isfinite(mu_s).all():
+            raise ConformalError("a source lies outside the flattened domain", 'degenerate', 'larger_grid')
+        radius = seed_radius(mu, valid, G.h, source_radius)
+        src_local = np.zeros(len(ch.V), bool)
+        src_local[loc] = True
+        T = np.full(G.shape, np.inf)
+        near = np.full(len(ch.V), np.inf)
+        used = None
+        groups = _groups(mu_s)
+        for idx in groups:
+            tau = radius * G.h / float(mu_s[idx].min())
+            reach = radius * float(mu_s[idx].max() / mu_s[idx].min())
+            Tloc = _local_times(G, inv_mu, valid, S[idx], reach, domain=march_on)
+            Tloc = self._exact_seed(ch, Tloc, tree, X_src, upper, src_local, src_faces)
+            h_far = 4.0 * G.h
+            phi = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * mu, h_far)
+            phi = np.minimum(phi, h_far)
+            seed = phi < 0
+            if not seed.any():
+                raise ConformalError("the source seed covers no grid node", 'degenerate', 'larger_grid')
+            if calibrate:
+                phi = calibrate_phi(phi, valid, G.h)
+            # march without the rim nodes that bridge gaps of the domain (the front would jump between
+            # parts that are far apart on the surface); those get extrapolated values for sampling
+            Tm, used = eikonal_march(Tloc, seed & march_on, phi, mu, ~march_on, G.h, self.solver)
+            Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else np.where(seed, Tloc, Tm)
+            if rim.any():
+                Tg = np.where(rim & ~seed, extrapolate_rim(Tg, march_on, rim, G.h, inv_mu), Tg)
+            np.minimum(T, Tg, out=T)
+            nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=ch.P, domain=march_on)
+            near = np.where(nv <= tau, np.fmin(near, nv), near)
+        T[~valid] = np.inf
+        dist = bilinear(np.where(valid, T, np.nan), ch.P, valid)
+        dist = np.fmin(dist, near)
+        return dist, radius, len(groups)
+
+    def _fill_unreached(self, dist_s, charts):
+        """Vertices of the ``charts`` (indices) that no grid node reached (UV slivers thinner than a
+        cell) get the shortest path through the edges from the reached ones: a Dijkstra run from a
+        virtual node joined to every reached vertex by an edge of its distance. ``dist_s`` (N,) is
+        changed in place; returns the number of vertices filled."""
+        import scipy.sparse as sp
+        from scipy.sparse.csgraph import dijkstra
+        verts = np.concatenate([self.charts[c].verts for c in charts])
+        bad = verts[~np.isfinite(dist_s[verts])]
+        if not len(bad):
+            return 0
+        good = verts[np.isfinite(dist_s[verts])]
+        if not len(good):
+            raise ConformalError("no vertex was reached by the front: the UV domain is too thin for "
+                                 "this grid", 'not_reached', 'larger_grid')
+        N = len(dist_s)
+        link = sp.coo_matrix((np.maximum(dist_s[good], 1e-300), (np.full(len(good), N), good)),
+                             shape=(N + 1, N + 1))
+        G = (sp.block_diag([self.graph, sp.csr_matrix((1, 1))]) + link).tocsr()
+        via = dijkstra(G, directed=True, indices=N)[:N]
+        dist_s[bad] = via[bad]
+        if not np.isfinite(dist_s[bad]).all():
+            raise ConformalError(f"{int((~np.isfinite(dist_s[bad])).sum())} vertices were not reached "
+                                 "by the front", 'not_reached', 'larger_grid')
+        return int(len(bad))
+
+    def _exact_seed(self, ch, Tloc, tree, X_src, upper, src_local, src_faces):
+        """Bound the seed window's chart times ``Tloc`` (ny, nx) by exact values: not below the 3D
+        distance to the nearest source, not above the edge-path bound through the node's triangle
+        (``upper``, None: skip), and equal to the 3D distance in a triangle that has a source vertex
+        as a corner or holds a source point (the geodesic is a straight segment there)."""
+        ii, jj = np.nonzero(np.isfinite(Tloc))
+        if not len(ii):
+            return Tloc
+        X, f = ch.node_points(ii, jj)
+        E, _ = tree.query(X)
+        t = np.maximum(Tloc[ii, jj], E)
+        corners = ch.F[f]                                                   # (q,3) local
+        star = src_local[corners].any(1) | np.isin(f, src_faces)
+        inside = ch.grid.inside[ii, jj]
+        t = np.where(star & inside, E, t)
+        if upper is not None:
+            up = upper[ch.verts[corners]] + np.linalg.norm(ch.V[corners] - X[:, None], axis=2)
+            t = np.minimum(t, up.min(1))
+        out = Tloc.copy()
+        out[ii, jj] = t
+        return out
+
+
+def geodesic_distance(V: np.ndarray, F: np.ndarray, sources=None, points=None, uv: np.ndarray | None = None,
+                      boundary: str = 'uniform', grid: int | None = None, solver: str = 'auto',
+                      mu_mode: str = 'vertex', source_radius: float | None = None, calibrate: bool = True,
+                      progress=None, seams: np.ndarray | None = None, clamp: bool = True,
+                      error_target: float = ERROR_TARGET) -> tuple[np.ndarray, dict]:
+    """Geodesic distances from a set of sources to every vertex, by fast marching on the conformal
+    plane: ``GeodesicSolver(V, F, uv, boundary, grid, solver, mu_mode, seams, error_target).distance(
+    sources, points, source_radius, calibrate, clamp)``, for one query. V (n,3), F (m,3).
+
+    Returns ``(dist, report)``: ``dist`` (n,) float64 in mesh units (NaN at vertices in no triangle,
+    inf on islands without a source); ``report`` as ``GeodesicSolver.distance``, with the set-up's
+    ``boundary`` (and ``mu_ratio`` when it flattened). Raises ``ConformalError``."""
+    say = progress or (lambda f, msg: None)
+    V, F = _check_mesh_arrays(V, F)
+    _parse_sources(len(V), len(F), sources, points)                   # validate before any work
+    gs = GeodesicSolver(V, F, uv=uv, boundary=boundary, grid=grid, solver=solver, mu_mode=mu_mode,
+                        seams=seams, error_target=error_target, progress=lambda f, m: say(0.4 * f, m))
+    return gs.distance(sources, points, source_radius=source_radius, calibrate=calibrate, clamp=clamp,
+                       progress=lambda f, m: say(0.4 + 0.6 * f, m))

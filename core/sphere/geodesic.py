@@ -94,9 +94,9 @@ def _seed(chart, ws, radius):
 def _march(phi, chart, solver, T0=None, narrow=0.0):
     """Travel time (ny, nx) from the zero contour of ``phi`` in ``chart`` (inf where not reached).
     With scikit-fmm the march stops ``narrow`` beyond the contour (0: no limit); otherwise
-    ``core.geodesic.march`` runs (the numpy sweep holds ``T0``'s finite nodes fixed and returns full
+    ``core.geodesic.solver.eikonal_march`` runs (the numpy sweep holds ``T0``'s finite nodes fixed and returns full
     times). Returns (T, solver used)."""
-    from ..geodesic.solver import march
+    from ..geodesic.solver import eikonal_march as march
     mask = ~chart.valid
     if solver in ('auto', 'skfmm'):
         try:
@@ -127,10 +127,11 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     V (n,3), F (m,3); ``sources`` vertex indices (k,) (the result is the distance to the nearest).
     ``S`` (n,3): a sphere map to reuse (from ``sphere_map``); None computes one with ``moebius``.
     ``grid``: nodes per side of each chart (None: ``default_sphere_grid``). ``solver``: as
-    ``core.geodesic.march`` ('auto', 'skfmm', 'sweep'). ``overlap``: half-width of the band the two
+    ``core.geodesic.solver.eikonal_march`` ('auto', 'skfmm', 'sweep'). ``overlap``: half-width of the band the two
     charts share, in degrees of latitude. ``source_radius``: exact seed disk radius, in cells.
     Returns ``(dist (n,) float64 in mesh units, report dict)``."""
-    from ..geodesic.solver import calibrate_phi, vertex_mu
+    from ..geodesic.solver import calibrate_phi
+    from ..mesh.measures import vertex_mu
     say = progress or (lambda f, msg: None)
     t0 = time.perf_counter()
     V = np.asarray(V, np.float64)
@@ -159,7 +160,7 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     P = S[F]
     a_s = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
     mu_f = np.sqrt(np.maximum(a_s, np.finfo(float).tiny) / face_areas(V, F))
-    logmu_v = np.log(vertex_mu(V, F, mu_f))
+    logmu_v = np.log(vertex_mu(F, mu_f, face_areas(V, F), n))
     R = float(np.tan(np.radians(45.0 + 0.5 * overlap)))
     say(0.2, 'rasterising the charts')
     charts = [_Chart('N', S, F, logmu_v, R, grid), _Chart('S', S, F, logmu_v, R, grid)]
