@@ -23,15 +23,18 @@ import numpy as np
 from ..errors import ConformalError
 from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian, face_gradients, gradient, divergence
-from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians
+from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians, signed_uv_areas
+from ..mesh.intrinsic import intrinsic_delaunay
 from ..mesh.solve import Factor, factor_all
 from .lscm import lscm
 from .uniform import optimise, vertex_bound
-from ..mesh.validate import check_mesh, normalise_scale, DEFAULT_MAX_FACES
+from ..mesh.validate import check_mesh, degenerate_faces, normalise_scale, DEFAULT_MAX_FACES
 
 BOUNDARY_MODES = ('free', 'area', 'uniform')
 FIT_MODES = ('true_scale', 'unit_square')
+OPERATOR_MODES = ('auto', 'intrinsic', 'extrinsic')
 AUTO_BOUND_FACES = 20_000      # above this the certified bound is computed only on request
+QC_WARN = 1.5                  # a map with qc_mean above this gets a warning
 
 
 @dataclass
@@ -55,14 +58,35 @@ class DiskSystem:
     defect, ``k`` (nb,) boundary turning angles, ``l`` (nb,) boundary edge lengths (edge j runs from
     B[j] to B[j+1])."""
 
-    def __init__(self, V, F, loop, neumann=True):
+    def __init__(self, V, F, loop, neumann=True, operators='auto'):
+        if operators not in OPERATOR_MODES:
+            raise ConformalError(f"unknown operators {operators!r}: use one of {', '.join(OPERATOR_MODES)}")
         self.V, self.F = V, F
         n = self.n = len(V)
         self.B = np.asarray(loop, np.int64)
         mask = np.zeros(n, bool)
         mask[self.B] = True
         self.I = np.nonzero(~mask)[0]
-        self.L = cotan_laplacian(V, F)
+        self.G, self.N, self.A = face_gradients(V, F)
+        self._T = None
+        self.operators = {'mode': operators, 'intrinsic': False}
+        if operators != 'extrinsic':
+            T = intrinsic_delaunay(V, F)
+            rep = T.report
+            use = operators == 'intrinsic' or rep['negative_before'] > rep['negative_boundary_after'] \
+                or rep['eps'] > 0
+            if use:
+                self._T = T
+                self.operators.update(intrinsic=True, **{k: T.report[k] for k in (
+                    'flips', 'eps', 'negative_before', 'negative_after', 'converged')})
+            else:
+                self.operators['negative_weights'] = T.report['negative_before']
+        if self._T is not None:
+            self.L = self._T.cotan_laplacian().tocsr()
+            s = self._T.angle_sums()
+        else:
+            self.L = cotan_laplacian(V, F)
+            s = angle_sums(V, F)
         LI = self.L[self.I]
         self.L_II = LI[:, self.I].tocsc()
         self.L_IB = LI[:, self.B].tocsc()
@@ -74,11 +98,9 @@ class DiskSystem:
         else:
             self._II = Factor(self.L_II) if len(self.I) else None
             self._neumann = None
-        s = angle_sums(V, F)
         self.Omega = np.where(mask, 0.0, 2 * np.pi - s)
         self.k = np.pi - s[self.B]
         self.l = np.linalg.norm(V[np.roll(self.B, -1)] - V[self.B], axis=1)
-        self.G, self.N, self.A = face_gradients(V, F)
 
     # --- step 2: interior log scale factors -----------------------------------------------------
     def solve_II(self, b):
@@ -129,8 +151,11 @@ class DiskSystem:
         ``L y = div(n x grad x)``, with y fixed at one boundary vertex."""
         if self._neumann is None:
             self._neumann = Factor(self.L[self._keep][:, self._keep])
-        X = np.cross(self.N, gradient(self.G, self.F, x))
-        b = divergence(self.G, self.F, self.A, X, self.n)
+        if self._T is not None:
+            b = self._T.divergence(self._T.rotated(self._T.gradient(x)))
+        else:
+            X = np.cross(self.N, gradient(self.G, self.F, x))
+            b = divergence(self.G, self.F, self.A, X, self.n)
         y = np.zeros(self.n)
         y[self._keep] = self._neumann.solve(b[self._keep])
         return y
@@ -177,8 +202,20 @@ def normalise_uv(V, F, uv, fit='true_scale'):
     return (uv - lo) / size + (1 - (hi - lo) / size) / 2
 
 
+def _warnings(report, qc_limit=QC_WARN):
+    """The honest-report warnings (list of str) for a measured map's ``report``."""
+    w = []
+    if report.get('flips', 0):
+        w.append(f"{report['flips']} flipped (folded) UV triangle(s)")
+    if not report.get('qc_mean', 1.0) <= qc_limit:
+        w.append(f"poor conformality: qc_mean {report.get('qc_mean'):.3f} is above {qc_limit}")
+    if not np.isfinite(report.get('mu_ratio', np.nan)) or not report.get('mu_ratio', 0) > 0:
+        w.append("the conformal factor is not finite and positive on every triangle")
+    return w
+
+
 def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FACES, bound=None,
-            progress=None, real_faces=None, **options):
+            progress=None, real_faces=None, operators='auto', **options) -> FlattenResult:
     """Flatten a disk-topology triangle mesh conformally.
 
     V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise. boundary: 'free', 'area' or
@@ -187,8 +224,34 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     linear program fails the report says so and the map is still returned). progress: optional
     callable ``progress(fraction, message)``. real_faces: optional (m,) bool; only these triangles
     count in the objective and the measures (the others are temporary fill, e.g. of holes).
-    Extra ``options`` go to ``core.uniform.optimise``.
-    Returns ``FlattenResult``. Raises ``ConformalError`` on bad input."""
+    operators: 'auto' (intrinsic Delaunay operators where the mesh has non-Delaunay edges or needs
+    mollification, docs/math.md), 'intrinsic' (always) or 'extrinsic' (the mesh's own cotan weights).
+    Zero-area triangles are accepted: the intrinsic mollification gives them a valid metric, and they
+    are left out of the objective and the measures (``report['degenerate_faces']``).
+    Extra ``options`` go to ``core.disk.uniform.optimise``.
+    Returns ``FlattenResult``; ``report['warnings']`` (list of str) lists flips, qc_mean above 1.5,
+    fallbacks. Raises ``ConformalError`` on bad input."""
+    res = _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operators, **options)
+    r = res.report
+    if operators == 'auto' and r['operators'].get('intrinsic') and not r.get('degenerate_faces') and \
+            (r['flips'] or not r['qc_mean'] <= QC_WARN or 'fallback' in r):
+        # the intrinsic operators did not give a clean map here: try the mesh's own and keep the better
+        alt = _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, 'extrinsic', **options)
+        if _quality_key(alt.report) < _quality_key(r):
+            alt.report['operators']['tried_intrinsic'] = {k: r[k] for k in ('flips', 'qc_mean', 'mu_ratio')}
+            return alt
+    return res
+
+
+def _quality_key(r):
+    """Sort key of a measured map report (lower is better): flips, qc_mean over budget, -mu_ratio."""
+    mu = r.get('mu_ratio', 0.0)
+    return (r.get('flips', 0) + r.get('degenerate_flips', 0), not r.get('qc_mean', np.inf) <= QC_WARN,
+            -(mu if np.isfinite(mu) else 0.0))
+
+
+def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operators, **options):
+    """``flatten`` with one choice of operators."""
     if boundary not in BOUNDARY_MODES:
         raise ConformalError(f"unknown boundary mode {boundary!r}: use one of {', '.join(BOUNDARY_MODES)}")
     if fit not in FIT_MODES:
@@ -196,21 +259,30 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     report_progress = progress or (lambda f, msg: None)
     timings = {}
     t0 = time.perf_counter()
-    info = check_mesh(V, F, kind='disk', max_faces=max_faces)
+    info = check_mesh(V, F, kind='disk', max_faces=max_faces, allow_degenerate=True)
     F = np.asarray(F, np.int64)
     # work in units where the mesh spans [-1,1]: the same numbers at any scale (1e-100 or 1e100)
     V, unit = normalise_scale(np.asarray(V, np.float64))
     mask = None if real_faces is None else np.asarray(real_faces, bool)
     if mask is not None and (mask.shape != (len(F),) or not mask.any()):
         raise ConformalError("real_faces must be one boolean per triangle, with at least one True")
+    warnings = []
+    degenerate = degenerate_faces(V, F)
+    if degenerate.any():
+        mask = ~degenerate if mask is None else mask & ~degenerate
+        if not mask.any():
+            raise ConformalError("every triangle has zero area", 'degenerate', 'clean_mesh')
+        operators = 'intrinsic'
     timings['check'] = time.perf_counter() - t0
     report_progress(0.05, 'factorising the Laplacian')
     t = time.perf_counter()
-    system = DiskSystem(V, F, info.boundary, neumann=boundary != 'free')
+    system = DiskSystem(V, F, info.boundary, neumann=boundary != 'free', operators=operators)
     timings['factor'] = time.perf_counter() - t
     report_progress(0.25, 'solving')
     report = {'boundary': boundary, 'vertices': len(V), 'faces': len(F),
-              'boundary_vertices': int(len(info.boundary))}
+              'boundary_vertices': int(len(info.boundary)), 'operators': system.operators}
+    if degenerate.any():
+        report['degenerate_faces'] = int(degenerate.sum())
     u = None
     t = time.perf_counter()
     if boundary == 'free':
@@ -219,11 +291,20 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
         u = system.yamabe(np.zeros(len(system.B)))
         uv = system.map_from_u(u)
     else:
-        u, uv, opt = optimise(system, progress=report_progress, real_faces=mask, **options)
-        report.update(opt)
+        try:
+            u, uv, opt = optimise(system, progress=report_progress, real_faces=mask, **options)
+            report.update(opt)
+        except ConformalError as exc:
+            if exc.code not in ('invalid_input', 'solve_failed', 'degenerate') and 'folds' not in exc.problem:
+                raise
+            # the area map already folds: keep the better of it and LSCM, and say so
+            u, uv, which = _fallback(system, V, mask)
+            warnings.append(f"the uniform optimiser could not start ({exc.problem}); the {which} map "
+                            "is returned instead")
+            report['fallback'] = which
     timings['solve'] = time.perf_counter() - t
     if bound is None:
-        bound = boundary == 'uniform' and len(F) <= AUTO_BOUND_FACES
+        bound = boundary == 'uniform' and len(F) <= AUTO_BOUND_FACES and 'fallback' not in report
     if bound:
         report_progress(0.9, 'certifying the bound')
         t = time.perf_counter()
@@ -239,6 +320,9 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     J, A = system.jacobians(uv), system.A
     measured, mu_real = measures_from_jacobians(*((J, A) if mask is None else (J[mask], A[mask])))
     report.update(measured)
+    if degenerate.any():
+        # a zero-area triangle has no Jacobian; it still must not turn over in UV
+        report['degenerate_flips'] = int((signed_uv_areas(uv, F[degenerate]) < 0).sum())
     if u is not None:
         used = np.unique(Fm)
         report['vertex_ratio'] = float(np.exp(u[used].min() - u[used].max()))
@@ -246,6 +330,25 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     mu[np.arange(len(F)) if mask is None else mask] = mu_real
     if fit == 'true_scale':
         uv = uv * unit
+    report['warnings'] = warnings + _warnings(report)
     timings['total'] = time.perf_counter() - t0
     report['seconds'] = {k: round(v, 4) for k, v in timings.items()}
     return FlattenResult(uv=uv, mu=mu, u=u, report=report)
+
+
+def _fallback(system, V, mask):
+    """When the area map folds: (u or None, uv (n,2), name) of whichever of the area map and LSCM has
+    fewer flipped triangles among ``mask`` (None: all)."""
+    keep = slice(None) if mask is None else mask
+    cands = []
+    try:
+        u = system.yamabe(np.zeros(len(system.B)))
+        cands.append((u, system.map_from_u(u), 'area'))
+    except ConformalError:
+        pass
+    cands.append((None, lscm(V, system.L, system.B), 'free (LSCM)'))
+
+    def folds(c):
+        a = signed_uv_areas(c[1], system.F[keep])
+        return int((a * np.sign(a.sum()) <= 0).sum())
+    return min(cands, key=folds)
