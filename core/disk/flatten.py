@@ -1,8 +1,8 @@
-"""Conformal flattening of a disk with boundary scale factors (DESIGN.md section 2).
+"""Conformal flattening of a disk with boundary scale factors (docs/math.md).
 
 Sign convention: ``u = log mu`` is the log of the local scale (UV length per surface length). With
 the positive semidefinite ``L`` the flat-target Yamabe equation reads ``L u = -Omega`` inside and the
-target boundary curvature is ``k~ = k + (L u)_B``. DESIGN.md section 2 writes steps 2-3 for ``-u``;
+target boundary curvature is ``k~ = k + (L u)_B``. docs/math.md writes steps 2-3 for ``-u``;
 the two agree for ``u_B = 0`` and the certified bound is the same, but the lengths
 ``l~ = exp((u_i + u_j)/2) l`` need ``u = log mu``.
 
@@ -231,14 +231,18 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     Extra ``options`` go to ``core.disk.uniform.optimise``.
     Returns ``FlattenResult``; ``report['warnings']`` (list of str) lists flips, qc_mean above 1.5,
     fallbacks. Raises ``ConformalError`` on bad input."""
-    res = _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operators, **options)
+    # LSCM has no maximum principle to restore and measures slightly worse on the intrinsic
+    # triangulation of smooth grids (bench/flatten_table.py): 'auto' tries the mesh's own weights first
+    first, second = ('extrinsic', 'intrinsic') if boundary == 'free' else ('auto', 'extrinsic')
+    res = _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces,
+                   first if operators == 'auto' else operators, **options)
     r = res.report
-    if operators == 'auto' and r['operators'].get('intrinsic') and not r.get('degenerate_faces') and \
-            (r['flips'] or not r['qc_mean'] <= QC_WARN or 'fallback' in r):
-        # the intrinsic operators did not give a clean map here: try the mesh's own and keep the better
-        alt = _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, 'extrinsic', **options)
+    if operators == 'auto' and r['operators'].get('intrinsic') != (second == 'intrinsic') and \
+            not r.get('degenerate_faces') and (r['flips'] or not r['qc_mean'] <= QC_WARN or 'fallback' in r):
+        # the first operators did not give a clean map here: try the others and keep the better
+        alt = _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, second, **options)
         if _quality_key(alt.report) < _quality_key(r):
-            alt.report['operators']['tried_intrinsic'] = {k: r[k] for k in ('flips', 'qc_mean', 'mu_ratio')}
+            alt.report['operators']['tried_first'] = {k: r[k] for k in ('flips', 'qc_mean', 'mu_ratio')}
             return alt
     return res
 

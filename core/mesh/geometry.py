@@ -1,4 +1,4 @@
-"""Per-triangle and per-vertex discrete geometry (DESIGN.md section 1).
+"""Per-triangle and per-vertex discrete geometry (docs/math.md, discrete setting).
 
 All functions take ``V`` (n,3) float64 positions and ``F`` (m,3) int64 triangles, counter-clockwise.
 Lengths are in the mesh's units, angles in radians.
