@@ -515,12 +515,7 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0):
             Fh = F[half]
             ncomp, lab = topology.face_components(Fh, n)
             for k in range(ncomp):
-                sel = half[lab == k]
-                used, Fl = np.unique(F[sel], return_inverse=True)
-                Fl = Fl.reshape(-1, 3)
-                for faces, Fp, pv, uv, r in _solve_island(V[used], Fl, holes, boundary, desc, progress,
-                                                          options, depth + 1):
-                    pieces.append((sel[faces], Fp, used[pv], uv, r))
+                pieces += _solve_part(V, F, half[lab == k], holes, boundary, desc, progress, options, depth)
     except ConformalError:
         pieces = []
     if pieces and all(p[4]['flips'] + p[4]['overlaps'] <= rep['flips'] + rep['overlaps'] for p in pieces):
@@ -545,6 +540,21 @@ def _single_triangle(V, tri):
     return np.array([[0, 1, 2]]), uv, rep
 
 
+def _solve_part(V, F, sel, holes, boundary, desc, progress, options, depth):
+    """Pieces of the sub-island ``F[sel]`` (repaired first: removing triangles can pinch vertices)."""
+    used, Fl = np.unique(F[sel], return_inverse=True)
+    R = repair(V[used], Fl.reshape(-1, 3))
+    out = []
+    ncomp, lab = topology.face_components(R.F, len(R.V))
+    for k in range(ncomp):
+        sub = np.nonzero(lab == k)[0]
+        u2, F2 = np.unique(R.F[sub], return_inverse=True)
+        for faces, Fp, pv, uv, r in _solve_island(R.V[u2], F2.reshape(-1, 3), holes, boundary, desc,
+                                                  progress, options, depth + 1):
+            out.append((sel[R.face_map[sub[faces]]], Fp, used[R.vert_map[u2[pv]]], uv, r))
+    return out
+
+
 def _detach(V, F, bad, holes, boundary, desc, progress, options, depth):
     """Pieces of the island ``F`` (m,3) with the triangles ``bad`` (k,) each made an island of its own
     and the rest (its edge-connected parts) flattened again with ``_solve_island``."""
@@ -552,11 +562,7 @@ def _detach(V, F, bad, holes, boundary, desc, progress, options, depth):
     rest = np.setdiff1d(np.arange(len(F)), bad)
     ncomp, lab = topology.face_components(F[rest], len(V))
     for k in range(ncomp):
-        sel = rest[lab == k]
-        used, Fl = np.unique(F[sel], return_inverse=True)
-        for faces, Fp, pv, uv, r in _solve_island(V[used], Fl.reshape(-1, 3), holes, boundary, desc, progress,
-                                                  options, depth + 1):
-            pieces.append((sel[faces], Fp, used[pv], uv, r))
+        pieces += _solve_part(V, F, rest[lab == k], holes, boundary, desc, progress, options, depth)
     for t in bad.tolist():
         Fp, uv, r = _single_triangle(V, F[t])
         pieces.append((np.array([t]), Fp, F[t].copy(), uv, r))

@@ -71,10 +71,11 @@ class DiskSystem:
         self._T = None
         self.operators = {'mode': operators, 'intrinsic': False}
         if operators != 'extrinsic':
-            T = intrinsic_delaunay(V, F)
+            # mollify only when asked ('intrinsic', which flatten() uses on zero-area triangles): on
+            # valid needles it would bend an exact map (a flat needle strip maps isometrically)
+            T = intrinsic_delaunay(V, F, mollify_delta=1e-4 if operators == 'intrinsic' else 0.0)
             rep = T.report
-            use = operators == 'intrinsic' or rep['negative_before'] > rep['negative_boundary_after'] \
-                or rep['eps'] > 0
+            use = operators == 'intrinsic' or rep['negative_before'] > rep['negative_boundary_after']
             if use:
                 self._T = T
                 self.operators.update(intrinsic=True, **{k: T.report[k] for k in (
