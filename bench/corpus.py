@@ -33,7 +33,8 @@ def main():
     if not os.path.isdir(MESHES):
         sys.exit(f"the corpus is missing: {os.path.abspath(MESHES)} does not exist (see docs/robustness.md)")
     blender = '' if args.no_blender else ' Blender conformal flips / mu_ratio | Blender angle-based ditto |'
-    print(f"| mesh | triangles | repairs | islands | flips | overlaps | qc_mean worst | mu_ratio worst | s |{blender}")
+    print("| mesh | triangles | repairs | islands | flips | overlaps | qc_mean worst | mu_ratio worst | s |"
+          + blender)
     print('|---' * (9 if args.no_blender else 11) + '|')
     for name in args.meshes:
         mesh = read_obj(os.path.join(MESHES, f'{name}.obj'))
