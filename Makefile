@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-numpy2 bench package clean venv
+.PHONY: demo test test-numpy2 lint bench package clean venv
 
 venv: $(STAMP)
 
@@ -19,6 +19,9 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	BLENDER_USER_RESOURCES=$$(mktemp -d) $(PY) -m pytest -q tests
+
+lint: $(STAMP)
+	$(PY) -m ruff check .
 
 # The core alone (no bpy) on numpy 2, with the scipy we ship: the core must run on both numpy lines.
 NP2 := .venv-numpy2

@@ -6,6 +6,8 @@ import pytest
 import scipy.sparse as sp
 from scipy.spatial import Delaunay
 
+from core.errors import ConformalError
+
 from core.mesh.intrinsic import (IntrinsicTriangulation, corner_angles, edge_lengths_3d, face_areas,
                                  intrinsic_delaunay, layout, mollify)
 
@@ -66,11 +68,15 @@ def twisted_sphere(n_lon=64, n_lat=6, seed=1):
     return V, F
 
 
+def cross2(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
 def planar_delaunay(V):
     D = Delaunay(V[:, :2])
     F = D.simplices.astype(np.int64)
     P = V[F]
-    cw = np.cross(P[:, 1, :2] - P[:, 0, :2], P[:, 2, :2] - P[:, 0, :2]) < 0
+    cw = cross2(P[:, 1, :2] - P[:, 0, :2], P[:, 2, :2] - P[:, 0, :2]) < 0
     F[cw] = F[cw][:, ::-1]
     return F
 
@@ -110,7 +116,7 @@ def test_length_geometry_helpers():
     P = layout(l)[0]
     d = np.linalg.norm(P[[1, 2, 0]] - P[[2, 0, 1]], axis=1)
     np.testing.assert_allclose(d, l[0])
-    assert np.cross(P[1] - P[0], P[2] - P[0]) > 0
+    assert cross2(P[1] - P[0], P[2] - P[0]) > 0
 
 
 # --- flat meshes: intrinsic Delaunay == planar Delaunay -----------------------------------------------
@@ -251,11 +257,11 @@ def test_several_components_and_errors():
     T = intrinsic_delaunay(V, F)
     assert T.report['converged']
     assert interior_weights(T).min() >= -1e-12
-    with pytest.raises(ValueError):
+    with pytest.raises(ConformalError):
         intrinsic_delaunay(V1, np.concatenate([F1, F1[:1]]))          # an edge with 3 faces
     bad = F1.copy()
     bad[0] = bad[0, ::-1]
-    with pytest.raises(ValueError):
+    with pytest.raises(ConformalError):
         intrinsic_delaunay(V1, bad)
     assert isinstance(T, IntrinsicTriangulation)
 
@@ -267,3 +273,17 @@ def test_speed_100k_printed():
     dt = time.perf_counter() - t0
     print('\nintrinsic_delaunay: %d triangles in %.2f s, %s' % (len(F), dt, T.report))
     assert T.report['converged']
+
+
+def test_guards_unflippable_edge_and_round_limit():
+    # a two-triangle "pillow": edge 1-2 sees the obtuse angle at vertex 0 on both sides, but its two
+    # opposite vertices are the same vertex, so it is not flipped; no endless loop, and it is reported
+    V = np.array([[0, 0.2, 0], [-1, 0, 0], [1, 0, 0]], dtype=float)
+    T = intrinsic_delaunay(V, [[0, 1, 2], [0, 2, 1]])
+    assert T.report['flips'] == 0 and T.report['non_delaunay_after'] == 1 and not T.report['converged']
+    V, F = jittered_grid(20, shear=6.0, jitter=0.2, seed=4)
+    T1 = intrinsic_delaunay(V, F, max_rounds=1)
+    assert T1.report['rounds'] == 1 and not T1.report['converged']
+    T = intrinsic_delaunay(V, F)
+    assert T.report['rounds'] > 1 and T.report['converged']
+    assert intrinsic_delaunay(V, F[:0]).report['flips'] == 0

@@ -9,7 +9,7 @@ The cure used here does not move any vertex and does not change the surface:
    smallest one for which every triangle inequality holds with a margin ``delta * mean edge length``.
    Zero-area and needle triangles become valid, small, well-defined triangles; a good mesh gets
    ``eps = 0`` and is left exactly as it was.
-2. Intrinsic edge flips (Fisher, Springborn, Bobenko and Schroeder 2007, "An algorithm for the
+2. Intrinsic edge flips (Fisher, Springborn, Schroeder and Bobenko 2007, "An algorithm for the
    construction of intrinsic Delaunay triangulations with applications to digital geometry
    processing"). An interior edge whose opposite angles sum to more than pi is replaced by the other
    diagonal of the quad formed by its two triangles. The quad is laid out flat in the plane (it is flat
@@ -42,6 +42,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+
+from ..errors import ConformalError
 
 _NEXT = np.array([1, 2, 0])
 _PREV = np.array([2, 0, 1])
@@ -143,12 +145,11 @@ def _build_edges(F, n):
     key = lo * np.int64(n) + hi
     uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
     if np.any(cnt > 2):
-        raise ValueError('non-manifold edge: %d edges have more than two faces' % int(np.sum(cnt > 2)))
+        raise ConformalError(f'{int(np.sum(cnt > 2))} non-manifold edges have more than two faces', 'bad_topology')
     if np.any(u == v):
-        raise ValueError('a face uses the same vertex twice')
+        raise ConformalError('a face uses the same vertex twice', 'degenerate')
     E = len(uniq)
     FE = inv.reshape(m, 3).astype(np.int64)
-    h = np.arange(3 * m, dtype=np.int64)
     order = np.argsort(inv, kind='stable')
     first = np.ones(3 * m, dtype=bool)
     first[1:] = inv[order][1:] != inv[order][:-1]
@@ -162,8 +163,7 @@ def _build_edges(F, n):
     e1 = inv[h1]
     g0 = h0[np.searchsorted(inv[h0], e1)] if len(h1) else h0[:0]
     if np.any(u[h1] != v[g0]):
-        raise ValueError('faces are not consistently oriented')
-    del h
+        raise ConformalError('faces are not consistently oriented', 'bad_topology')
     return FE, EF, EC
 
 
@@ -295,11 +295,12 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
     """Intrinsic Delaunay triangulation of the mesh ``V`` (n,3), ``F`` (m,3) by edge flips on lengths.
 
     ``F`` must be manifold and consistently oriented (boundaries and several components are fine).
-    ``lengths`` optional (m,3) per-face lengths to use instead of the 3D ones. Lengths are first
-    mollified with ``mollify_delta`` (0 disables), then non-Delaunay interior edges (``cot alpha +
-    cot beta < -tol``) are flipped in parallel rounds until none is left or ``max_rounds`` is reached
-    (``max_rounds=0``: no flips, the mollified input mesh). An edge is not flipped when its two opposite
-    vertices are the same vertex or when both sides are the same face.
+    ``lengths`` optional (m,3) per-face lengths to use instead of the 3D ones (they must agree on the
+    two faces of an edge; the last face wins). Lengths are first mollified with ``mollify_delta``
+    (0 disables), then non-Delaunay interior edges (``cot alpha + cot beta < -tol``) are flipped in
+    parallel rounds until none is left or ``max_rounds`` is reached (``max_rounds=0``: no flips, the
+    mollified input mesh). An edge is not flipped when its two opposite vertices are the same vertex or
+    when both sides are the same face.
 
     Returns an ``IntrinsicTriangulation``; its ``report`` has ``flips``, ``rounds``, ``eps`` (the
     mollification, units of V), ``negative_before`` / ``negative_after`` (edges with cotan weight
