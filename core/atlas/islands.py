@@ -254,12 +254,13 @@ def hole_cut_paths(V, F, n, loops):
 # ----------------------------------------------------------------------------------------------
 # checks of a UV layout
 # ----------------------------------------------------------------------------------------------
-def boundary_crossings(uv, loops):
+def boundary_crossings(uv, loops, return_segments=False):
     """Number of pairs of boundary segments that cross each other in the UV plane. ``uv`` (n,2),
     ``loops`` list of (k,) vertex loops. Together with zero flipped triangles, zero crossings means
-    the map of a disk is one-to-one (no overlap)."""
+    the map of a disk is one-to-one (no overlap). With ``return_segments``, returns (count, (k,2)
+    int64 vertex pairs of the segments involved)."""
     if not loops:
-        return 0
+        return (0, np.zeros((0, 2), np.int64)) if return_segments else 0
     a = np.concatenate(loops)
     b = np.concatenate([np.roll(lp, -1) for lp in loops])
     P, Q = uv[a], uv[b]
@@ -273,6 +274,7 @@ def boundary_crossings(uv, loops):
         return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
 
     count = 0
+    hits = []
     i = np.arange(len(a))
     d = 1
     while len(i):
@@ -287,7 +289,11 @@ def boundary_crossings(uv, loops):
             x = (orient(P[ci], Q[ci], P[cj]) * orient(P[ci], Q[ci], Q[cj]) < 0) & \
                 (orient(P[cj], Q[cj], P[ci]) * orient(P[cj], Q[cj], Q[ci]) < 0)
             count += int(x.sum())
+            if return_segments and x.any():
+                hits += [np.stack([a[ci[x]], b[ci[x]]], 1), np.stack([a[cj[x]], b[cj[x]]], 1)]
         d += 1
+    if return_segments:
+        return count, (np.concatenate(hits) if hits else np.zeros((0, 2), np.int64))
     return count
 
 
@@ -438,12 +444,14 @@ def _cut_island(V, F, loops):
     return c.F, c.vert_of, topology.boundary_loops(c.F, len(c.vert_of)), info
 
 
-def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0):
+def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=None):
     """Flatten one connected island (local ``V`` (n,3), ``F`` (m,3)), choosing how to treat its holes
     and repairing overlaps. Returns a list of pieces ``(faces (k,) rows of F, Fp (k,3) piece vertex ids,
     pv (N,) local vertex of each piece vertex, uv (N,2), report)``: one piece, or several when an
-    overlapping island had to be split."""
+    overlapping island had to be split. ``poly`` (m,) optional polygon of each triangle: a polygon is
+    never split between pieces (an OBJ polygon has one UV per corner)."""
     n = len(V)
+    poly = np.arange(len(F)) if poly is None else np.asarray(poly)
     loops = topology.boundary_loops(F, n)
     everything = np.arange(len(F))
     ident = np.arange(n)
@@ -473,6 +481,21 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0):
             if exc.code in ('no_boundary', 'genus', 'holes', 'invalid_input', 'too_large'):
                 raise
             first_error = first_error or exc
+    if cands and len(modes) == 1 and len(loops) > 1 and holes != 'error' and \
+            cands[0][4]['flips'] + cands[0][4]['overlaps'] > 0:
+        # the requested hole mode overlaps or folds: try the other one too and keep the better
+        try:
+            if modes[0] == 'cut':
+                uv, rep = _flatten_island(V, F, loops, 'fill', boundary, desc, progress, options)
+                cands.append((everything, F, ident, uv, rep))
+            else:
+                Fc, vo, lc, info = _cut_island(V, F, loops)
+                uv, rep = _flatten_island(V[vo], Fc, lc, holes, boundary, desc, progress, options)
+                rep['holes'] = info
+                rep['loops_before_cut'] = len(loops)
+                cands.append((everything, Fc, vo, uv, rep))
+        except ConformalError:
+            pass
     if not cands:
         raise first_error
     cands.sort(key=lambda c: _score(c[4]))
@@ -484,20 +507,30 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0):
     if rep['flips'] + rep['overlaps'] == 0 or len(F) < 4:
         rep['warnings'] = _island_warnings(rep)
         return [best]
-    if (rep['flips'] or not rep['qc_mean'] <= QC_WARN) and depth < 4:
-        # triangles that fold or collapse in every mode (a fold of the surface itself): detach them as
-        # islands of their own (laid out isometrically) and flatten the rest again
+    if (rep['flips'] or rep['overlaps'] or not rep['qc_mean'] <= QC_WARN) and depth < 4:
+        # triangles that fold or collapse in every mode (a fold of the surface itself), and the
+        # triangles on boundary edges that cross (e.g. at a pinch where two holes touch): detach them
+        # as islands of their own (laid out isometrically) and flatten the rest again
         J, _ = jacobians(V[best[2]], best[1], best[3])
         sv = singular_values(J)
         folded = (determinants(J) <= 0) | (sv[:, 0] > DETACH_QC * np.maximum(sv[:, 1], np.finfo(float).tiny))
         folded &= ~degenerate_faces(V[best[2]], best[1])
-        if folded.any() and folded.sum() <= 0.05 * len(F):
+        if rep['overlaps']:
+            loops_b = topology.boundary_loops(best[1], len(best[2]))
+            _, seg = boundary_crossings(best[3], loops_b, return_segments=True)
+            H = topology.halfedges(best[1])
+            hk = H[:, 0] * len(best[2]) + H[:, 1]
+            folded[np.isin(hk, seg[:, 0] * len(best[2]) + seg[:, 1]).reshape(-1, 3).any(1)] = True
+        folded = np.isin(poly, poly[folded])                   # whole polygons
+        if folded.any() and folded.sum() <= 0.05 * len(F) + 4:
             try:
-                pieces = _detach(V, F, np.nonzero(folded)[0], holes, boundary, desc, progress, options, depth)
+                pieces = _detach(V, F, np.nonzero(folded)[0], holes, boundary, desc, progress, options, depth,
+                                 poly)
             except ConformalError:
                 pieces = []
             if pieces and max(_score(p[4]) for p in pieces) < _score(rep):
-                note = f"{int(folded.sum())} folded triangle(s) detached as islands of their own"
+                note = (f"{int(folded.sum())} folded or overlapping triangle(s) detached as islands of "
+                        "their own")
                 for p in pieces:
                     p[4].setdefault('split_from_overlap', note)
                 return pieces
@@ -509,13 +542,16 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0):
     C = V[F].mean(axis=1)
     axis = np.linalg.svd(C - C.mean(0), full_matrices=False)[2][0]
     side = (C - C.mean(0)) @ axis > np.median((C - C.mean(0)) @ axis)
+    _, first, inv = np.unique(poly, return_index=True, return_inverse=True)
+    side = side[first][inv.ravel()]                          # whole polygons on one side
     pieces = []
     try:
         for half in (np.nonzero(~side)[0], np.nonzero(side)[0]):
             Fh = F[half]
             ncomp, lab = topology.face_components(Fh, n)
             for k in range(ncomp):
-                pieces += _solve_part(V, F, half[lab == k], holes, boundary, desc, progress, options, depth)
+                pieces += _solve_part(V, F, half[lab == k], holes, boundary, desc, progress, options, depth,
+                                      poly)
     except ConformalError:
         pieces = []
     if pieces and all(p[4]['flips'] + p[4]['overlaps'] <= rep['flips'] + rep['overlaps'] for p in pieces):
@@ -540,7 +576,7 @@ def _single_triangle(V, tri):
     return np.array([[0, 1, 2]]), uv, rep
 
 
-def _solve_part(V, F, sel, holes, boundary, desc, progress, options, depth):
+def _solve_part(V, F, sel, holes, boundary, desc, progress, options, depth, poly):
     """Pieces of the sub-island ``F[sel]`` (repaired first: removing triangles can pinch vertices)."""
     used, Fl = np.unique(F[sel], return_inverse=True)
     R = repair(V[used], Fl.reshape(-1, 3))
@@ -550,22 +586,26 @@ def _solve_part(V, F, sel, holes, boundary, desc, progress, options, depth):
         sub = np.nonzero(lab == k)[0]
         u2, F2 = np.unique(R.F[sub], return_inverse=True)
         for faces, Fp, pv, uv, r in _solve_island(R.V[u2], F2.reshape(-1, 3), holes, boundary, desc,
-                                                  progress, options, depth + 1):
+                                                  progress, options, depth + 1, poly[sel][R.face_map[sub]]):
             out.append((sel[R.face_map[sub[faces]]], Fp, used[R.vert_map[u2[pv]]], uv, r))
     return out
 
 
-def _detach(V, F, bad, holes, boundary, desc, progress, options, depth):
-    """Pieces of the island ``F`` (m,3) with the triangles ``bad`` (k,) each made an island of its own
-    and the rest (its edge-connected parts) flattened again with ``_solve_island``."""
+def _detach(V, F, bad, holes, boundary, desc, progress, options, depth, poly):
+    """Pieces of the island ``F`` (m,3) with the polygons of the triangles ``bad`` (k,) each made an
+    island of its own and the rest (its edge-connected parts) flattened again with ``_solve_island``."""
     pieces = []
     rest = np.setdiff1d(np.arange(len(F)), bad)
     ncomp, lab = topology.face_components(F[rest], len(V))
     for k in range(ncomp):
-        pieces += _solve_part(V, F, rest[lab == k], holes, boundary, desc, progress, options, depth)
-    for t in bad.tolist():
-        Fp, uv, r = _single_triangle(V, F[t])
-        pieces.append((np.array([t]), Fp, F[t].copy(), uv, r))
+        pieces += _solve_part(V, F, rest[lab == k], holes, boundary, desc, progress, options, depth, poly)
+    for p in np.unique(poly[bad]).tolist():
+        faces = bad[poly[bad] == p]
+        if len(faces) == 1:
+            Fp, uv, r = _single_triangle(V, F[faces[0]])
+            pieces.append((faces, Fp, F[faces[0]].copy(), uv, r))
+        else:
+            pieces += _solve_part(V, F, faces, holes, boundary, desc, progress, options, 4, poly)
     return pieces
 
 
@@ -663,7 +703,8 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
             report_progress(base + span * f, f"island {i + 1}/{n_cut}: {msg}")
 
         try:
-            got = _solve_island(Vi, Fi, holes, boundary, desc, sub, options)
+            got = _solve_island(Vi, Fi, holes, boundary, desc, sub, options,
+                                poly=None if tri_poly is None else tri_poly[tri_of[faces]])
             for fl, Fp, pv, ui, r in got:
                 pieces.append((faces[fl], Fp, R.vert_map[cut.vert_of[lo + pv]], ui, r, desc))
         except ConformalError as exc:
