@@ -162,12 +162,19 @@ class DiskSystem:
         return y
 
     def extend(self, P):
-        """UV (n,2) from the boundary polygon ``P`` (nb,2): x harmonic, y its conjugate. The result
-        is shifted so that y matches the polygon on average along the boundary."""
-        x = self.harmonic(P[:, 0])
-        y = self.conjugate(x)
-        y += np.mean(P[:, 1] - y[self.B])
-        return np.stack([x, y], axis=1)
+        """UV (n,2) from the boundary polygon ``P`` (nb,2). Both ways of extending are averaged: x
+        harmonic with y its conjugate, and y harmonic with x its negative conjugate (each shifted to
+        match the polygon on average along the boundary). Each alone turns with the polygon only up
+        to discretisation error; the average ``(A(Px) + i A(Py)) / 2`` with ``A(f) = h(f) + i c(h(f))``
+        is exactly rotation-equivariant, so the map does not depend on where the boundary loop starts
+        (i.e. on the vertex numbering)."""
+        H = self.harmonic(P)                                    # (n,2): h(Px), h(Py)
+        x1, y2 = H[:, 0], H[:, 1]
+        y1 = self.conjugate(x1)
+        x2 = -self.conjugate(y2)
+        y1 += np.mean(P[:, 1] - y1[self.B])
+        x2 += np.mean(P[:, 0] - x2[self.B])
+        return np.stack([0.5 * (x1 + x2), 0.5 * (y1 + y2)], axis=1)
 
     def jacobians(self, uv):
         """Per-triangle Jacobians (m,2,2) of a UV map (n,2); the triangles' own frames are cached."""
@@ -193,6 +200,11 @@ def normalise_uv(V, F, uv, fit='true_scale'):
     C = (uv * np.bincount(F.ravel(), np.repeat(np.abs(a), 3), minlength=len(uv))[:, None]).T @ uv
     w, R = np.linalg.eigh(C)
     R = R[:, ::-1]
+    # an eigenvector's sign is arbitrary: choose the one with the positive third moment along the
+    # main axis, so that the result does not depend on the order of vertices or faces
+    wt = np.bincount(F.ravel(), np.repeat(np.abs(a), 3), minlength=len(uv))
+    if (wt * (uv @ R[:, 0]) ** 3).sum() < 0:
+        R[:, 0] *= -1
     if np.linalg.det(R) < 0:
         R[:, 1] *= -1
     uv = uv @ R
