@@ -156,8 +156,9 @@ def test_shelf_pack_has_no_overlap():
     off, (w, h) = shelf_pack(sizes, 0.01)
     lo, hi = off, off + sizes
     assert lo.min() >= 0.01 - 1e-12 and hi[:, 0].max() <= w and hi[:, 1].max() <= h
-    sep = (hi[:, None, 0] + 0.01 <= lo[None, :, 0] + 1e-12) | (hi[None, :, 0] + 0.01 <= lo[:, None, 0] + 1e-12) \
-        | (hi[:, None, 1] + 0.01 <= lo[None, :, 1] + 1e-12) | (hi[None, :, 1] + 0.01 <= lo[:, None, 1] + 1e-12)
+    g = 0.01 - 1e-12
+    sep = (hi[:, None, 0] + g <= lo[None, :, 0]) | (hi[None, :, 0] + g <= lo[:, None, 0]) \
+        | (hi[:, None, 1] + g <= lo[None, :, 1]) | (hi[None, :, 1] + g <= lo[:, None, 1])
     np.fill_diagonal(sep, True)
     assert sep.all()
     assert (sizes.prod(1).sum() / (w * h)) > 0.5        # not absurdly wasteful

@@ -180,7 +180,8 @@ class DiskSystem:
         """Per-triangle Jacobians (m,2,2) of a UV map (n,2); the triangles' own frames are cached."""
         if getattr(self, '_frames', None) is None:
             self._frames, _ = local_frames(self.V, self.F)
-        return jacobians_from_frames(self._frames, self.F, uv)
+        with np.errstate(divide='ignore', invalid='ignore'):       # zero-area triangles: inf/NaN
+            return jacobians_from_frames(self._frames, self.F, uv)
 
     def map_from_u(self, u):
         """UV (n,2) of the conformal map with log scale factor ``u`` (n,)."""

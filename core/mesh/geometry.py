@@ -40,7 +40,8 @@ def angle_sums(V, F, n=None):
 
 
 def angle_defect(V, F, boundary_mask):
-    """Discrete Gaussian curvature ``Omega`` (n,): 2*pi - angle sum at interior vertices, 0 on the boundary."""
+    """Discrete Gaussian curvature ``Omega`` (n,): 2*pi - angle sum at interior vertices, 0 on the
+    boundary."""
     s = angle_sums(V, F)
     return np.where(boundary_mask, 0.0, 2 * np.pi - s)
 
