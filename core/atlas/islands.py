@@ -376,8 +376,10 @@ def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
                         'hole_loop_vertices': [h['loop_vertices'] for h in info]}
     real = np.zeros(len(Ff), bool)
     real[:m] = True                  # fill triangles come after the island's own (fill_holes)
+    # the certified bound (a linear program) costs far more than the map on real islands: only on
+    # request (bound=True in the options)
     res = flatten(Vf, Ff, boundary=boundary, fit='true_scale', max_faces=None, progress=progress,
-                  real_faces=real if len(Ff) > m else None, **options)
+                  real_faces=real if len(Ff) > m else None, **{'bound': False, **options})
     uv = res.uv[:n]
     a_uv = signed_uv_areas(uv, F).sum()
     if not a_uv > 0:
