@@ -346,7 +346,7 @@ def test_tube_is_cut_not_filled_by_auto():
     assert auto.report['mu_ratio_worst'] > fill.report['mu_ratio_worst']
     assert auto.report['flips'] == 0 and auto.report['overlaps'] == 0 and not auto.report['warnings']
     # both candidates are measured and reported
-    assert set(auto.islands[0]['holes']['auto']) == {'fill', 'cut'}
+    assert set(auto.islands[0]['holes']['auto']) == {'fill/uniform', 'cut/uniform'}
 
 
 def test_many_holes_cut_without_overlap():
@@ -370,4 +370,4 @@ def test_many_holes_cut_without_overlap():
         isl = res.islands[0]['holes']
         assert isl['mode'] in ('fill', 'cut')
         if isl['mode'] == 'fill' and holes == 'cut':
-            assert isl['auto']['cut']['overlaps'] > 0
+            assert isl['auto']['cut/area']['overlaps'] > 0

@@ -468,44 +468,51 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=
     else:
         modes = ['cut' if _hole_geometry_prefers_cut(V, F, loops) else 'fill']
     first_error = None
-    for mode in modes:
+
+    def attempt(mode, bnd):
+        nonlocal first_error
         try:
             if mode == 'fill':
-                uv, rep = _flatten_island(V, F, loops, holes, boundary, desc, progress, options)
-                cands.append((everything, F, ident, uv, rep))
+                uv, rep = _flatten_island(V, F, loops, 'fill' if holes == 'cut' else holes, bnd, desc,
+                                          progress, options)
+                cand = (everything, F, ident, uv, rep)
             else:
                 Fc, vo, lc, info = _cut_island(V, F, loops)
-                uv, rep = _flatten_island(V[vo], Fc, lc, holes, boundary, desc, progress, options)
+                uv, rep = _flatten_island(V[vo], Fc, lc, holes, bnd, desc, progress, options)
                 rep['holes'] = info
                 rep['loops_before_cut'] = len(loops)
-                cands.append((everything, Fc, vo, uv, rep))
+                cand = (everything, Fc, vo, uv, rep)
+            rep['boundary_used'] = bnd
+            cands.append(cand)
         except ConformalError as exc:
             if exc.code in ('no_boundary', 'genus', 'holes', 'invalid_input', 'too_large'):
                 raise
             first_error = first_error or exc
-    if cands and len(modes) == 1 and len(loops) > 1 and holes != 'error' and \
-            cands[0][4]['flips'] + cands[0][4]['overlaps'] > 0:
+
+    def clean():
+        return any(c[4]['flips'] + c[4]['overlaps'] == 0 for c in cands)
+
+    for mode in modes:
+        attempt(mode, boundary)
+    if not clean() and len(modes) == 1 and len(loops) > 1 and holes != 'error':
         # the requested hole mode overlaps or folds: try the other one too and keep the better
-        try:
-            if modes[0] == 'cut':
-                uv, rep = _flatten_island(V, F, loops, 'fill', boundary, desc, progress, options)
-                cands.append((everything, F, ident, uv, rep))
-            else:
-                Fc, vo, lc, info = _cut_island(V, F, loops)
-                uv, rep = _flatten_island(V[vo], Fc, lc, holes, boundary, desc, progress, options)
-                rep['holes'] = info
-                rep['loops_before_cut'] = len(loops)
-                cands.append((everything, Fc, vo, uv, rep))
-        except ConformalError:
-            pass
+        attempt('fill' if modes[0] == 'cut' else 'cut', boundary)
+    if not clean() and boundary == 'uniform':
+        # the optimiser watches flips, not overlaps: the area map (u_B = 0) may be one-to-one
+        for mode in dict.fromkeys(c[4].get('holes', {}).get('mode', 'fill') for c in cands) or ['fill']:
+            attempt(mode, 'area')
     if not cands:
         raise first_error
     cands.sort(key=lambda c: _score(c[4]))
     best = cands[0]
     rep = best[4]
-    if len(cands) > 1:
-        rep['holes']['auto'] = {c[4]['holes']['mode']: {k: c[4][k] for k in ('mu_ratio', 'qc_mean', 'flips',
-                                                                              'overlaps')} for c in cands}
+    if best[4]['boundary_used'] != boundary:
+        rep['fallback_boundary'] = (f"the {boundary} map overlapped or folded in every hole mode; the "
+                                    f"{rep['boundary_used']} map is used")
+    if len(cands) > 1 and 'holes' in rep:
+        rep['holes']['auto'] = {f"{c[4].get('holes', {}).get('mode', 'none')}/{c[4]['boundary_used']}":
+                                {k: c[4][k] for k in ('mu_ratio', 'qc_mean', 'flips', 'overlaps')}
+                                for c in cands}
     if rep['flips'] + rep['overlaps'] == 0 or len(F) < 4:
         rep['warnings'] = _island_warnings(rep)
         return [best]
@@ -797,6 +804,10 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
     if split_notes:
         repairs.append({'repair': 'islands_split_for_overlap', 'count': len(split_notes),
                         'note': '; '.join(split_notes)})
+    fallbacks = [r for r in rep_ok if 'fallback_boundary' in r]
+    if fallbacks:
+        repairs.append({'repair': 'boundary_fallback', 'count': len(fallbacks),
+                        'note': f"islands whose {boundary} map overlapped or folded use the area map"})
     warnings = []
     for r in reports:
         for w in r.get('warnings', []):
