@@ -422,7 +422,7 @@ def _score(rep):
 
 
 DETACH_QC = 10.0                 # triangles this sheared in an island's best map are detached
-AUTO_TRY_BOTH_FACES = 60_000     # holes='auto' flattens both ways up to this size, else decides by geometry
+AUTO_TRY_BOTH_FACES = 150_000    # holes='auto' flattens both ways up to this size, else decides by geometry
 
 
 def _hole_geometry_prefers_cut(V, F, loops):
@@ -537,7 +537,9 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=
                                  poly)
             except ConformalError:
                 pieces = []
-            if pieces and max(_score(p[4]) for p in pieces) < _score(rep):
+            bad_after = sum(p[4]['flips'] + p[4]['overlaps'] for p in pieces)
+            if pieces and (bad_after < rep['flips'] + rep['overlaps'] or
+                           (bad_after == 0 and max(_score(p[4]) for p in pieces) < _score(rep))):
                 note = (f"{int(folded.sum())} folded or overlapping triangle(s) detached as islands of "
                         "their own")
                 for p in pieces:
