@@ -93,6 +93,18 @@ def main():
         except ConformalError as exc:
             row = (f"| {name} | {len(F)} | | error {exc.code} / {exc.remedy} | | | | | "
                    f"{time.perf_counter() - t:.1f} |")
+            if exc.code == 'no_boundary':
+                # the open parts still unwrap: on_error='skip' (CLI --skip-bad) flattens them
+                try:
+                    t = time.perf_counter()
+                    r = unwrap(mesh.V, F, seams=seams, tri_poly=tp, on_error='skip').report
+                    reps = ', '.join(f"{x['repair']} {x['count']}" for x in r['repairs']) or '-'
+                    row = (f"| {name} (skip closed) | {len(F)} | {reps} | {r['flattened']} of "
+                           f"{r['islands']} ({r['failed']} closed) | {r['flips']} | {r['overlaps']} | "
+                           f"{r['qc_mean_worst']:.3f} | {r['mu_ratio_worst']:.3g} | "
+                           f"{time.perf_counter() - t:.1f} |")
+                except ConformalError:
+                    pass
         if not args.no_blender:
             from blender_unwrap import corner_measures
             closed = 'error no_boundary' in row
