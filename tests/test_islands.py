@@ -371,3 +371,16 @@ def test_many_holes_cut_without_overlap():
         assert isl['mode'] in ('fill', 'cut')
         if isl['mode'] == 'fill' and holes == 'cut':
             assert isl['auto']['cut/area']['overlaps'] > 0
+
+
+def test_extreme_scale_is_warned():
+    """A long tube forced to be filled (not cut) has texel density varying by orders of magnitude: the
+    result comes back with a warning, never as plain success."""
+    V, F = _cylinder(nu=16, nv=41, h=12.0)
+    res = unwrap(V, F, holes='fill', boundary='area')
+    r = res.report
+    assert r['mu_ratio_worst'] < 1e-4
+    assert any('extreme scale variation' in w for w in r['warnings'])
+    assert any('extreme scale variation' in w for w in res.islands[0]['warnings'])
+    cut = unwrap(V, F, boundary='area')                      # auto: cut, uniform density
+    assert cut.report['mu_ratio_worst'] > 0.5 and not cut.report['warnings']

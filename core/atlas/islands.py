@@ -33,7 +33,7 @@ from ..mesh.geometry import face_areas
 from ..mesh.measures import determinants, jacobians, signed_uv_areas, singular_values, uv_measures
 from ..mesh import topology
 from ..mesh.repair import repair, zero_area_note
-from ..disk.flatten import QC_WARN
+from ..disk.flatten import MU_WARN, QC_WARN
 from ..mesh.validate import (DEFAULT_MAX_FACES, check_arrays, degenerate_faces, loose_edge_count,
                              normalise_scale)
 
@@ -394,7 +394,8 @@ def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
     rep['overlaps'] = boundary_crossings(uv, loops)
     rep.update({k: res.report[k] for k in ('bound_vertex', 'vertex_ratio', 'operators', 'fallback')
                 if k in res.report})
-    rep['warnings'] = [w for w in res.report.get('warnings', []) if 'flipped' not in w and 'qc_mean' not in w]
+    rep['warnings'] = [w for w in res.report.get('warnings', [])
+                       if 'flipped' not in w and 'qc_mean' not in w and 'scale variation' not in w]
     rep['seconds'] = res.report.get('seconds', {}).get('total')
     return uv, rep
 
@@ -410,6 +411,9 @@ def _island_warnings(rep):
         w.append(f"the island overlaps itself ({rep['overlaps']} boundary crossings)")
     if not (np.isfinite(rep.get('mu_ratio', np.nan)) and rep.get('mu_ratio', 0) > 0):
         w.append("the conformal factor is not finite and positive")
+    elif rep['mu_ratio'] < MU_WARN:
+        w.append(f"extreme scale variation: mu_ratio {rep['mu_ratio']:.2g} (texel density varies more "
+                 f"than {1 / MU_WARN:.0e}-fold); mark seams to cut long or closed parts apart")
     return list(dict.fromkeys(w))
 
 

@@ -35,6 +35,7 @@ FIT_MODES = ('true_scale', 'unit_square')
 OPERATOR_MODES = ('auto', 'intrinsic', 'extrinsic')
 AUTO_BOUND_FACES = 20_000      # above this the certified bound is computed only on request
 QC_WARN = 1.5                  # a map with qc_mean above this gets a warning
+MU_WARN = 1e-4                 # ... and one with mu_ratio below this (texel density varies 10^4-fold)
 
 
 @dataclass
@@ -225,6 +226,9 @@ def _warnings(report, qc_limit=QC_WARN):
         w.append(f"poor conformality: qc_mean {report.get('qc_mean'):.3f} is above {qc_limit}")
     if not np.isfinite(report.get('mu_ratio', np.nan)) or not report.get('mu_ratio', 0) > 0:
         w.append("the conformal factor is not finite and positive on every triangle")
+    elif report['mu_ratio'] < MU_WARN:
+        w.append(f"extreme scale variation: mu_ratio {report['mu_ratio']:.2g} (texel density varies more "
+                 f"than {1 / MU_WARN:.0e}-fold); mark seams to cut long or closed parts apart")
     return w
 
 
