@@ -46,7 +46,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--modes', nargs='+', default=['area', 'free', 'uniform'])
     args = ap.parse_args()
-    print('| case | mode | islands | holes filled/cut | flips | overlaps | worst qc_mean | worst mu_ratio | s |')
+    print('| case | mode | islands | holes filled/cut | flips | overlaps | worst qc_mean | worst mu_ratio '
+          '| s |')
     print('|---|---|---|---|---|---|---|---|---|')
     for name, V, F, S, holes in cases():
         for mode in args.modes:

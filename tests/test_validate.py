@@ -81,7 +81,8 @@ CASES = {
     'zero_area_collinear': (_collinear, r'zero-area face', r'merge vertices by distance'),
     'zero_area_repeated_index': (lambda: _with_face([[1, 1, 2]]), r'1 zero-area face \(faces 32\)',
                                  r'merge vertices by distance|dissolve'),
-    'duplicate_face': (lambda: _with_face([[0, 1, 6]]), r'1 duplicate face \(faces 32\)', r'delete the duplicate'),
+    'duplicate_face': (lambda: _with_face([[0, 1, 6]]), r'1 duplicate face \(faces 32\)',
+                       r'delete the duplicate'),
     'duplicate_face_reversed': (lambda: _with_face([[6, 1, 0]]), r'duplicate face', r'delete the duplicate'),
     'loose_vertex': (lambda: (np.vstack([_grid()[0], [[5.0, 5, 5]]]), _grid()[1]),
                      r'1 loose vertex.*vertices 25', r'delete loose geometry'),
@@ -89,10 +90,17 @@ CASES = {
     'inf': (lambda: _coord(np.inf), r'NaN or infinite.*vertices 7', r'fix or delete'),
     'empty': (lambda: (np.zeros((0, 3)), np.zeros((0, 3), np.int64)), r'empty', r'at least one triangle'),
     'inconsistent_orientation': (_flipped, r'not consistently oriented', r'recalculate normals'),
-    'missing_vertex': (lambda: _with_face([[0, 1, 99]]), r'missing vertices \(faces 32\)', r'must lie in 0\.\.24'),
+    'missing_vertex': (lambda: _with_face([[0, 1, 99]]), r'missing vertices \(faces 32\)',
+                       r'must lie in 0\.\.24'),
 }
-# flatten needs a disk; unwrap a surface. Which cases each rejects (all of them):
+# flatten needs a disk; unwrap a surface. Which cases each rejects:
 SURFACE_OK = {'closed', 'holes', 'handle'}          # valid surfaces, rejected only for their topology
+# issue 12: zero-area faces are mollified, not refused (flatten and unwrap); unwrap repairs the rest
+# internally and lists the repairs (tests/test_corpus.py checks the results)
+FLATTEN_OK = {'zero_area_coincident', 'zero_area_collinear'}
+UNWRAP_REPAIRS = FLATTEN_OK | {'zero_area_repeated_index', 'duplicate_face', 'duplicate_face_reversed',
+                               'loose_vertex', 'inconsistent_orientation', 'non_manifold_edge',
+                               'non_manifold_vertex'}
 
 
 def _check_message(msg, what, todo):
@@ -102,7 +110,7 @@ def _check_message(msg, what, todo):
     assert '\n' not in msg
 
 
-@pytest.mark.parametrize('name', sorted(CASES))
+@pytest.mark.parametrize('name', sorted(set(CASES) - FLATTEN_OK))
 def test_core_flatten_rejects(name):
     make, what, todo = CASES[name]
     V, F = make()
@@ -114,7 +122,18 @@ def test_core_flatten_rejects(name):
             check_mesh(V, F, kind='surface', allow_parts=True)
 
 
-@pytest.mark.parametrize('name', sorted(CASES))
+@pytest.mark.parametrize('name', sorted(UNWRAP_REPAIRS))
+def test_core_unwrap_repairs(name):
+    """Messy input with an answer is repaired internally: no error, the repair listed, the input
+    arrays unchanged, no flips or overlaps."""
+    V, F = CASES[name][0]()
+    V0, F0 = np.array(V, copy=True), np.array(F, copy=True)
+    res = unwrap(V, F, boundary='area')
+    assert (np.asarray(V) == V0).all() and (np.asarray(F) == F0).all()
+    assert res.report['repairs'] and res.report['flips'] == 0 and res.report['overlaps'] == 0
+
+
+@pytest.mark.parametrize('name', sorted(set(CASES) - UNWRAP_REPAIRS))
 def test_core_unwrap_rejects(name):
     make, what, todo = CASES[name]
     V, F = make()
@@ -128,13 +147,16 @@ def test_core_unwrap_rejects(name):
 def test_loose_edges_and_size_limit_core():
     V, F = _grid()
     with pytest.raises(ConformalError) as err:
-        unwrap(V, F, boundary='area', edges=[[0, 1], [0, 24]])
+        check_loose_edges([[0, 1], [0, 24]], F)
     _check_message(str(err.value), r'1 loose edge.*\(0, 24\)', r'delete loose geometry')
+    rep = unwrap(V, F, boundary='area', edges=[[0, 1], [0, 24]]).report['repairs']
+    assert {'repair': 'loose_edges_ignored', 'count': 1, 'note': 'edges in no face'} in rep
     check_loose_edges([[0, 1], [0, 6]], F)          # edges of faces (a diagonal too) are fine
     for fn in (flatten, unwrap):
         with pytest.raises(ConformalError) as err:
             fn(V, F, boundary='area', max_faces=31)
-        _check_message(str(err.value), r'32 triangles, over the limit of 31', r'decimate|raise the size limit')
+        _check_message(str(err.value), r'32 triangles, over the limit of 31',
+                       r'decimate|raise the size limit')
     flatten(V, F, boundary='area', max_faces=32)
     unwrap(V, F, boundary='area', max_faces=None)
 
@@ -154,7 +176,10 @@ def test_genuine_needles_still_work(eps):
         res = flatten(V, F, boundary='area')
         assert res.report['flips'] == 0 and np.isfinite(res.uv).all()
         if surface == 'flat':
-            assert res.report['qc_max'] < 1 + 1e-6
+            # the intrinsic Delaunay operators (issue 12) lay needles out slightly less exactly than
+            # the mesh's own weights at aspect 1e9 (see the report of issue 12)
+            assert res.report['qc_max'] < (1 + 1e-6 if eps >= 1e-3 else 2.5)
+            assert res.report['qc_mean'] < 1 + 1e-6
         assert unwrap(V, F, boundary='area').report['flips'] == 0
 
 
@@ -188,6 +213,8 @@ CLI_CASES = sorted(set(CASES) - {'missing_vertex', 'empty'})     # those two are
 @pytest.mark.parametrize('command', ['flatten', 'unwrap'])
 @pytest.mark.parametrize('name', CLI_CASES)
 def test_cli_rejects(tmp_path, capsys, command, name):
+    if name in (UNWRAP_REPAIRS if command == 'unwrap' else FLATTEN_OK):
+        return                      # repaired, not refused (test_core_unwrap_repairs)
     make, what, todo = CASES[name]
     V, F = make()
     src, out = tmp_path / 'in.obj', tmp_path / 'out.obj'
@@ -232,8 +259,8 @@ def test_cli_unwrap_loose_edges_limit_and_seams(tmp_path, capsys):
     src, out = tmp_path / 'in.obj', tmp_path / 'out.obj'
     _write_obj(src, V, F, extra='l 1 25\n')
     rc, _, err = _cli(['unwrap', str(src), str(out), '--boundary', 'area'], capsys)
-    assert rc == 2 and len(err.splitlines()) == 1
-    _check_message(err.strip(), r"1 loose edge", r"delete loose geometry|--ignore-loose")
+    assert rc == 0 and 'loose_edges_ignored (1)' in err           # ignored and listed
+    os.remove(out)
     assert _cli(['unwrap', str(src), str(out), '--boundary', 'area', '--ignore-loose'], capsys)[0] == 0
     os.remove(out)
     _write_obj(src, V, F)
@@ -262,11 +289,15 @@ def test_cli_subprocess_no_traceback(tmp_path):
     V, F = _nm_vertex()
     src, out = tmp_path / 'in.obj', tmp_path / 'out.obj'
     _write_obj(src, V, F)
-    p = subprocess.run([PY, '-m', 'core', 'unwrap', str(src), str(out), '--boundary', 'area'],
+    p = subprocess.run([PY, '-m', 'core', 'flatten', str(src), str(out), '--boundary', 'area'],
                        cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert p.returncode == 2
     assert p.stdout == '' and len(p.stderr.splitlines()) == 1 and 'Traceback' not in p.stderr
     assert 'non-manifold vertex' in p.stderr and not out.exists()
+    # unwrap repairs it; '| head -1' on the JSON report closes the pipe early: no traceback
+    p = subprocess.run(f"'{PY}' -m core unwrap '{src}' '{out}' --boundary area --json | head -c 10",
+                       shell=True, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert 'Traceback' not in p.stderr and 'BrokenPipe' not in p.stderr
 
 
 def test_counts_in_messages_are_plural_words():

@@ -2,7 +2,8 @@
 
 Pipeline of ``unwrap``:
 
-1. Validate the whole mesh (``check_mesh`` kind 'surface', several pieces allowed).
+1. Check the arrays (``check_arrays``) and repair a copy of the mesh (``core.mesh.repair``): loose,
+   degenerate and duplicate elements left out, non-manifold vertices split, faces re-oriented.
 2. ``cut_along_seams``: triangles joined across a non-seam interior edge belong to the same island;
    the corners around each vertex are grouped into wedges separated by seam edges, and every wedge
    becomes its own vertex. So islands never share vertices, and a seam that ends inside an island
@@ -29,11 +30,14 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
-from ..mesh.measures import uv_measures
+from ..mesh.measures import determinants, jacobians, signed_uv_areas, singular_values, uv_measures
 from ..mesh import topology
-from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, check_loose_edges, normalise_scale
+from ..mesh.repair import repair, zero_area_note
+from ..disk.flatten import MU_WARN, QC_WARN
+from ..mesh.validate import (DEFAULT_MAX_FACES, check_arrays, degenerate_faces, loose_edge_count,
+                             normalise_scale)
 
-HOLE_MODES = ('fill', 'cut', 'error')
+HOLE_MODES = ('auto', 'fill', 'cut', 'error')
 ISLAND_SCALES = ('true', 'normalise')
 FITS = ('unit_square', 'true_scale')
 ON_ERROR = ('raise', 'skip')
@@ -170,8 +174,9 @@ def fill_holes(V, F, loops, rings=None):
     loop and a fan around a new centre vertex (the loop's centroid). The cap is flat (in the loop's
     best-fit plane direction) when that gives a valid triangulation of the projected hole, which is
     exact for a planar hole that is star-shaped from its centroid; otherwise it is lifted into a low
-    dome so that no cap triangle is degenerate. Returns ``(V2 (n2,3), F2 (m2,3), info)``: the first n vertices and m triangles are the
-    input's; ``info`` is a list of dicts (loop length, added vertices and faces) per filled hole."""
+    dome so that no cap triangle is degenerate. Returns ``(V2 (n2,3), F2 (m2,3), info)``: the first n
+    vertices and m triangles are the input's; ``info`` is a list of dicts (loop length, added vertices
+    and faces) per filled hole."""
     Vs, Fs, info = [V], [F], []
     nv = len(V)
     for loop in loops[1:]:
@@ -249,12 +254,13 @@ def hole_cut_paths(V, F, n, loops):
 # ----------------------------------------------------------------------------------------------
 # checks of a UV layout
 # ----------------------------------------------------------------------------------------------
-def boundary_crossings(uv, loops):
+def boundary_crossings(uv, loops, return_segments=False):
     """Number of pairs of boundary segments that cross each other in the UV plane. ``uv`` (n,2),
     ``loops`` list of (k,) vertex loops. Together with zero flipped triangles, zero crossings means
-    the map of a disk is one-to-one (no overlap)."""
+    the map of a disk is one-to-one (no overlap). With ``return_segments``, returns (count, (k,2)
+    int64 vertex pairs of the segments involved)."""
     if not loops:
-        return 0
+        return (0, np.zeros((0, 2), np.int64)) if return_segments else 0
     a = np.concatenate(loops)
     b = np.concatenate([np.roll(lp, -1) for lp in loops])
     P, Q = uv[a], uv[b]
@@ -268,6 +274,7 @@ def boundary_crossings(uv, loops):
         return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
 
     count = 0
+    hits = []
     i = np.arange(len(a))
     d = 1
     while len(i):
@@ -282,7 +289,11 @@ def boundary_crossings(uv, loops):
             x = (orient(P[ci], Q[ci], P[cj]) * orient(P[ci], Q[ci], Q[cj]) < 0) & \
                 (orient(P[cj], Q[cj], P[ci]) * orient(P[cj], Q[cj], Q[ci]) < 0)
             count += int(x.sum())
+            if return_segments and x.any():
+                hits += [np.stack([a[ci[x]], b[ci[x]]], 1), np.stack([a[cj[x]], b[cj[x]]], 1)]
         d += 1
+    if return_segments:
+        return count, (np.concatenate(hits) if hits else np.zeros((0, 2), np.int64))
     return count
 
 
@@ -340,8 +351,9 @@ def _describe(i, n_isl, faces, tri_poly):
 
 
 def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
-    """Flatten one island (local ``V`` (n,3), ``F`` (m,3), its boundary ``loops``). Returns (uv (n,2)
-    in mesh units with UV area = 3D area, report dict)."""
+    """Flatten one island (local ``V`` (n,3), ``F`` (m,3), its boundary ``loops``) with holes filled
+    virtually (``holes`` 'fill') or, if it has one loop, as it is. Returns (uv (n,2) in mesh units with
+    UV area = 3D area, report dict with the measures, ``overlaps`` and ``warnings``)."""
     from ..disk.flatten import flatten
     n, m = len(V), len(F)
     rep = {'loops': len(loops)}
@@ -358,48 +370,295 @@ def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
             raise ConformalError(f"{desc} has {len(loops)} boundary loops (an outer boundary and "
                                  f"{len(loops) - 1} hole(s))", 'holes', 'fill_holes')
         Vf, Ff, info = fill_holes(V, F, loops)
-        rep['holes'] = {'mode': 'fill', 'filled': len(info), 'fill_vertices': sum(h['fill_vertices'] for h in info),
+        rep['holes'] = {'mode': 'fill', 'filled': len(info),
+                        'fill_vertices': sum(h['fill_vertices'] for h in info),
                         'fill_faces': sum(h['fill_faces'] for h in info),
                         'hole_loop_vertices': [h['loop_vertices'] for h in info]}
     real = np.zeros(len(Ff), bool)
     real[:m] = True                  # fill triangles come after the island's own (fill_holes)
+    # the certified bound (a linear program) costs far more than the map on real islands: only on
+    # request (bound=True in the options)
     res = flatten(Vf, Ff, boundary=boundary, fit='true_scale', max_faces=None, progress=progress,
-                  real_faces=real if len(Ff) > m else None, **options)
+                  real_faces=real if len(Ff) > m else None, **{'bound': False, **options})
     uv = res.uv[:n]
-    W = uv[F]
-    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
-    a_uv = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()
+    a_uv = signed_uv_areas(uv, F).sum()
     if not a_uv > 0:
         raise ConformalError(f"{desc}: the flattened island has no positive UV area; the mesh is "
-                             "numerically degenerate: merge vertices by distance and retry")
+                             "numerically degenerate", 'degenerate', 'clean_mesh')
     uv = (uv - uv.mean(0)) * np.sqrt(face_areas(V, F).sum() / a_uv)
-    rep.update(uv_measures(V, F, uv))
+    ok = ~degenerate_faces(V, F)
+    rep.update(uv_measures(V, F[ok], uv))
+    if not ok.all():
+        rep['degenerate_faces'] = int((~ok).sum())
+        rep['flips'] += int((signed_uv_areas(uv, F[~ok]) < 0).sum())
     rep['overlaps'] = boundary_crossings(uv, loops)
-    rep.update({k: res.report[k] for k in ('bound_vertex', 'vertex_ratio') if k in res.report})
+    rep.update({k: res.report[k] for k in ('bound_vertex', 'vertex_ratio', 'operators', 'fallback')
+                if k in res.report})
+    rep['warnings'] = [w for w in res.report.get('warnings', [])
+                       if 'flipped' not in w and 'qc_mean' not in w and 'scale variation' not in w]
     rep['seconds'] = res.report.get('seconds', {}).get('total')
     return uv, rep
 
 
-def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='true', pack=True,
-           margin=0.01, fit='unit_square', max_faces=DEFAULT_MAX_FACES, allow_loose=False, edges=None,
-           on_error='raise', tri_poly=None, strict_seams=True, progress=None, **options):
+def _island_warnings(rep):
+    """The honest-report warnings of one island's measured report (flips, qc_mean, overlaps)."""
+    w = list(rep.get('warnings', []))
+    if rep.get('flips', 0):
+        w.append(f"{rep['flips']} flipped (folded) UV triangle(s)")
+    if not rep.get('qc_mean', 1.0) <= QC_WARN:
+        w.append(f"poor conformality: qc_mean {rep['qc_mean']:.3f} is above {QC_WARN}")
+    if rep.get('overlaps', 0):
+        w.append(f"the island overlaps itself ({rep['overlaps']} boundary crossings)")
+    if not (np.isfinite(rep.get('mu_ratio', np.nan)) and rep.get('mu_ratio', 0) > 0):
+        w.append("the conformal factor is not finite and positive")
+    elif rep['mu_ratio'] < MU_WARN:
+        w.append(f"extreme scale variation: mu_ratio {rep['mu_ratio']:.2g} (texel density varies more "
+                 f"than {1 / MU_WARN:.0e}-fold); mark seams to cut long or closed parts apart")
+    return list(dict.fromkeys(w))
+
+
+def _score(rep):
+    """Sort key of a candidate map (lower is better): no flips and no overlaps first, then qc_mean
+    within the warning budget, then the larger mu_ratio."""
+    mu = rep.get('mu_ratio', 0.0)
+    mu = mu if np.isfinite(mu) else 0.0
+    return (rep.get('flips', 1) + rep.get('overlaps', 1) > 0, not rep.get('qc_mean', np.inf) <= QC_WARN, -mu)
+
+
+DETACH_QC = 10.0                 # triangles this sheared in an island's best map are detached
+AUTO_TRY_BOTH_FACES = 150_000    # holes='auto' flattens both ways up to this size, else decides by geometry
+
+
+def _hole_geometry_prefers_cut(V, F, loops):
+    """Geometric rule for holes='auto' on big islands: cut when the holes are large for the island
+    (a tube's open end, not a small cap): total hole perimeter squared above the island's area."""
+    A = float(face_areas(V, F).sum())
+    per = sum(float(np.linalg.norm(V[np.roll(lp, -1)] - V[lp], axis=1).sum()) for lp in loops[1:])
+    return per * per > A
+
+
+def _cut_island(V, F, loops):
+    """Cut every hole of the island (``V`` (n,3), ``F`` (m,3)) open to the outer boundary. Returns
+    (Fc (m,3) ids of the cut vertices, vert_of (N,) local vertex of each cut vertex, loops, info)."""
+    n = len(V)
+    paths = hole_cut_paths(V, F, n, loops)
+    pairs = np.concatenate(paths) if paths else np.zeros((0, 2), np.int64)
+    c = cut_along_seams(F, n, pairs)
+    if c.n_islands != 1:                    # a cut path cannot disconnect a connected island
+        raise ConformalError("cutting the holes split the island", 'bad_topology')
+    info = {'mode': 'cut', 'cut': len(paths), 'cut_edges': int(len(pairs))}
+    return c.F, c.vert_of, topology.boundary_loops(c.F, len(c.vert_of)), info
+
+
+def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=None):
+    """Flatten one connected island (local ``V`` (n,3), ``F`` (m,3)), choosing how to treat its holes
+    and repairing overlaps. Returns a list of pieces ``(faces (k,) rows of F, Fp (k,3) piece vertex ids,
+    pv (N,) local vertex of each piece vertex, uv (N,2), report)``: one piece, or several when an
+    overlapping island had to be split. ``poly`` (m,) optional polygon of each triangle: a polygon is
+    never split between pieces (an OBJ polygon has one UV per corner)."""
+    n = len(V)
+    poly = np.arange(len(F)) if poly is None else np.asarray(poly)
+    loops = topology.boundary_loops(F, n)
+    everything = np.arange(len(F))
+    ident = np.arange(n)
+    cands = []
+    modes = []
+    if len(loops) <= 1 or holes in ('fill', 'error'):
+        modes = ['fill']
+    elif holes == 'cut':
+        modes = ['cut']
+    elif len(F) <= AUTO_TRY_BOTH_FACES:
+        modes = ['fill', 'cut']
+    else:
+        modes = ['cut' if _hole_geometry_prefers_cut(V, F, loops) else 'fill']
+    first_error = None
+
+    def attempt(mode, bnd):
+        nonlocal first_error
+        try:
+            if mode == 'fill':
+                uv, rep = _flatten_island(V, F, loops, 'fill' if holes == 'cut' else holes, bnd, desc,
+                                          progress, options)
+                cand = (everything, F, ident, uv, rep)
+            else:
+                Fc, vo, lc, info = _cut_island(V, F, loops)
+                uv, rep = _flatten_island(V[vo], Fc, lc, holes, bnd, desc, progress, options)
+                rep['holes'] = info
+                rep['loops_before_cut'] = len(loops)
+                cand = (everything, Fc, vo, uv, rep)
+            rep['boundary_used'] = bnd
+            cands.append(cand)
+        except ConformalError as exc:
+            if exc.code in ('no_boundary', 'genus', 'holes', 'invalid_input', 'too_large'):
+                raise
+            first_error = first_error or exc
+
+    def clean():
+        return any(c[4]['flips'] + c[4]['overlaps'] == 0 for c in cands)
+
+    for mode in modes:
+        attempt(mode, boundary)
+    if not clean() and len(modes) == 1 and len(loops) > 1 and holes != 'error':
+        # the requested hole mode overlaps or folds: try the other one too and keep the better
+        attempt('fill' if modes[0] == 'cut' else 'cut', boundary)
+    if not clean() and boundary == 'uniform':
+        # the optimiser watches flips, not overlaps: the area map (u_B = 0) may be one-to-one
+        for mode in dict.fromkeys(c[4].get('holes', {}).get('mode', 'fill') for c in cands) or ['fill']:
+            attempt(mode, 'area')
+    if not cands:
+        raise first_error
+    cands.sort(key=lambda c: _score(c[4]))
+    best = cands[0]
+    rep = best[4]
+    if best[4]['boundary_used'] != boundary:
+        rep['fallback_boundary'] = (f"the {boundary} map overlapped or folded in every hole mode; the "
+                                    f"{rep['boundary_used']} map is used")
+    if len(cands) > 1 and 'holes' in rep:
+        rep['holes']['auto'] = {f"{c[4].get('holes', {}).get('mode', 'none')}/{c[4]['boundary_used']}":
+                                {k: c[4][k] for k in ('mu_ratio', 'qc_mean', 'flips', 'overlaps')}
+                                for c in cands}
+    if rep['flips'] + rep['overlaps'] == 0 or len(F) < 4:
+        rep['warnings'] = _island_warnings(rep)
+        return [best]
+    if (rep['flips'] or rep['overlaps'] or not rep['qc_mean'] <= QC_WARN) and depth < 4:
+        # triangles that fold or collapse in every mode (a fold of the surface itself), and the
+        # triangles on boundary edges that cross (e.g. at a pinch where two holes touch): detach them
+        # as islands of their own (laid out isometrically) and flatten the rest again
+        J, _ = jacobians(V[best[2]], best[1], best[3])
+        sv = singular_values(J)
+        folded = (determinants(J) <= 0) | (sv[:, 0] > DETACH_QC * np.maximum(sv[:, 1], np.finfo(float).tiny))
+        folded &= ~degenerate_faces(V[best[2]], best[1])
+        if rep['overlaps']:
+            loops_b = topology.boundary_loops(best[1], len(best[2]))
+            _, seg = boundary_crossings(best[3], loops_b, return_segments=True)
+            H = topology.halfedges(best[1])
+            hk = H[:, 0] * len(best[2]) + H[:, 1]
+            folded[np.isin(hk, seg[:, 0] * len(best[2]) + seg[:, 1]).reshape(-1, 3).any(1)] = True
+        folded = np.isin(poly, poly[folded])                   # whole polygons
+        if folded.any() and folded.sum() <= 0.05 * len(F) + 4:
+            try:
+                pieces = _detach(V, F, np.nonzero(folded)[0], holes, boundary, desc, progress, options, depth,
+                                 poly)
+            except ConformalError:
+                pieces = []
+            bad_after = sum(p[4]['flips'] + p[4]['overlaps'] for p in pieces)
+            if pieces and (bad_after < rep['flips'] + rep['overlaps'] or
+                           (bad_after == 0 and max(_score(p[4]) for p in pieces) < _score(rep))):
+                note = (f"{int(folded.sum())} folded or overlapping triangle(s) detached as islands of "
+                        "their own")
+                for p in pieces:
+                    p[4].setdefault('split_from_overlap', note)
+                return pieces
+    if depth >= 3 or len(F) < 8:
+        rep['warnings'] = _island_warnings(rep)
+        return [best]
+    # overlap (or folds) in every mode: split the island in two across its longest 3D axis and
+    # flatten the halves; report the repair
+    C = V[F].mean(axis=1)
+    axis = np.linalg.svd(C - C.mean(0), full_matrices=False)[2][0]
+    side = (C - C.mean(0)) @ axis > np.median((C - C.mean(0)) @ axis)
+    _, first, inv = np.unique(poly, return_index=True, return_inverse=True)
+    side = side[first][inv.ravel()]                          # whole polygons on one side
+    pieces = []
+    try:
+        for half in (np.nonzero(~side)[0], np.nonzero(side)[0]):
+            Fh = F[half]
+            ncomp, lab = topology.face_components(Fh, n)
+            for k in range(ncomp):
+                pieces += _solve_part(V, F, half[lab == k], holes, boundary, desc, progress, options, depth,
+                                      poly)
+    except ConformalError:
+        pieces = []
+    if pieces and all(p[4]['flips'] + p[4]['overlaps'] <= rep['flips'] + rep['overlaps'] for p in pieces):
+        note = (f"split into {len(pieces)} islands to remove {rep['overlaps']} overlap(s) and "
+                f"{rep['flips']} flip(s)")
+        for p in pieces:
+            p[4]['split_from_overlap'] = note
+        return pieces
+    rep['warnings'] = _island_warnings(rep)
+    return [best]
+
+
+def _single_triangle(V, tri):
+    """A piece for one triangle (3,) of ``V``: laid out isometrically (its own plane), with its report."""
+    P = V[tri]
+    e1, e2 = P[1] - P[0], P[2] - P[0]
+    x = e1 / max(np.linalg.norm(e1), np.finfo(float).tiny)
+    nrm = np.cross(e1, e2)
+    y = np.cross(nrm / max(np.linalg.norm(nrm), np.finfo(float).tiny), x)
+    uv = np.array([[0.0, 0.0], [e1 @ x, 0.0], [e2 @ x, e2 @ y]])
+    rep = {'loops': 1, **uv_measures(P, np.array([[0, 1, 2]]), uv), 'overlaps': 0, 'warnings': []}
+    return np.array([[0, 1, 2]]), uv, rep
+
+
+def _solve_part(V, F, sel, holes, boundary, desc, progress, options, depth, poly):
+    """Pieces of the sub-island ``F[sel]`` (repaired first: removing triangles can pinch vertices)."""
+    used, Fl = np.unique(F[sel], return_inverse=True)
+    R = repair(V[used], Fl.reshape(-1, 3))
+    out = []
+    ncomp, lab = topology.face_components(R.F, len(R.V))
+    for k in range(ncomp):
+        sub = np.nonzero(lab == k)[0]
+        u2, F2 = np.unique(R.F[sub], return_inverse=True)
+        for faces, Fp, pv, uv, r in _solve_island(R.V[u2], F2.reshape(-1, 3), holes, boundary, desc,
+                                                  progress, options, depth + 1, poly[sel][R.face_map[sub]]):
+            out.append((sel[R.face_map[sub[faces]]], Fp, used[R.vert_map[u2[pv]]], uv, r))
+    return out
+
+
+def _detach(V, F, bad, holes, boundary, desc, progress, options, depth, poly):
+    """Pieces of the island ``F`` (m,3) with the polygons of the triangles ``bad`` (k,) each made an
+    island of its own and the rest (its edge-connected parts) flattened again with ``_solve_island``."""
+    pieces = []
+    rest = np.setdiff1d(np.arange(len(F)), bad)
+    ncomp, lab = topology.face_components(F[rest], len(V))
+    for k in range(ncomp):
+        pieces += _solve_part(V, F, rest[lab == k], holes, boundary, desc, progress, options, depth, poly)
+    for p in np.unique(poly[bad]).tolist():
+        faces = bad[poly[bad] == p]
+        if len(faces) == 1:
+            Fp, uv, r = _single_triangle(V, F[faces[0]])
+            pieces.append((faces, Fp, F[faces[0]].copy(), uv, r))
+        else:
+            pieces += _solve_part(V, F, faces, holes, boundary, desc, progress, options, 4, poly)
+    return pieces
+
+
+def _lowest_split_vertex(res_vert_of, n_in):
+    """(n_in,) the lowest split vertex of every input vertex (-1 if it has none). The corners of a
+    dropped face with a repeated vertex take these; a dropped duplicate takes its kept twin's."""
+    first = np.full(n_in, -1, np.int64)
+    ids = np.arange(len(res_vert_of))[::-1]
+    first[res_vert_of[ids]] = ids                      # lowest split vertex of every input vertex
+    return first
+
+
+def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='true', pack=True,
+           margin=0.01, fit='unit_square', max_faces=DEFAULT_MAX_FACES, allow_loose=True, edges=None,
+           on_error='raise', tri_poly=None, strict_seams=True, progress=None, **options) -> 'UnwrapResult':
     """Cut a triangle mesh into islands along ``seams`` and flatten every island conformally.
 
     V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise. seams: (k,2) int vertex pairs
     (edges marked as seams) or None; connected pieces are islands even without seams.
-    boundary: 'uniform', 'area' or 'free' (``core.flatten``). holes: 'fill' (virtual fill, default),
-    'cut' (cut each hole to the outer boundary) or 'error'. island_scale: 'true' (UV area = 3D area
-    on every island: one texel density) or 'normalise' (every island gets the same UV area).
+    boundary: 'uniform', 'area' or 'free' (``core.disk.flatten``). holes: 'auto' (default: per island,
+    fill the holes or cut them open to the outer boundary, whichever gives the better realised map),
+    'fill' (virtual fill), 'cut' or 'error'. island_scale: 'true' (UV area = 3D area on every island:
+    one texel density) or 'normalise' (every island gets the same UV area).
     pack: shelf-pack the islands without overlap, ``margin`` a fraction of the layout size.
     fit: 'unit_square' (scale the whole layout uniformly into [0,1]^2) or 'true_scale' (mesh units).
-    max_faces: size limit (None: none). allow_loose: accept vertices in no face. edges: optional
-    (e,2) all edges of the mesh, checked for loose edges. on_error: 'raise' stops at the first island
-    that cannot be flattened; 'skip' leaves its UVs at 0, marks it in ``ok`` and reports the error.
+    max_faces: size limit (None: none). allow_loose: kept for compatibility; loose vertices and loose
+    ``edges`` are always ignored and listed in ``report['repairs']``.
+    Messy input is repaired internally (``core.mesh.repair``): degenerate and duplicate faces dropped,
+    non-manifold vertices split, islands split along non-manifold edges, faces re-oriented per part;
+    the input arrays are never modified. An island whose map overlaps itself is split and re-flattened.
+    on_error: 'raise' stops at the first island that cannot be flattened; 'skip' leaves its UVs at 0,
+    marks it in ``ok`` and reports the error.
     tri_poly: optional (m,) polygon of each triangle, used to name polygons in messages.
     strict_seams: a seam that is not an edge of ``F`` is an error; False ignores it (useful when ``F``
     is a selection of a bigger mesh and ``seams`` are all of its seams).
     progress: optional callable ``progress(fraction, message)``. Extra ``options`` go to ``flatten``.
-    Returns ``UnwrapResult``. Raises ``ConformalError`` for bad input."""
+    Returns ``UnwrapResult``: every island report and the summary carry ``warnings`` (list of str) when
+    a result has flips, overlaps or qc_mean above 1.5. Raises ``ConformalError`` for bad input."""
     for name, value, allowed in (('holes', holes, HOLE_MODES), ('island_scale', island_scale, ISLAND_SCALES),
                                  ('fit', fit, FITS), ('on_error', on_error, ON_ERROR)):
         if value not in allowed:
@@ -408,113 +667,166 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='tru
         raise ConformalError(f"margin must be a fraction in [0, 0.5), got {margin}")
     report_progress = progress or (lambda f, msg: None)
     t0 = time.perf_counter()
-    V, F = as_arrays(V, F)
-    check_mesh(V, F, kind='surface', max_faces=max_faces, allow_loose=allow_loose, allow_parts=True)
-    # work in O(1) units whatever the mesh's (no under- or overflow); UVs are scaled back at the end
-    V, unit = normalise_scale(V)
-    if edges is not None:
-        check_loose_edges(edges, F)
+    V, F = check_arrays(V, F, max_faces=max_faces)
     n, m = len(V), len(F)
     if tri_poly is not None:
         tri_poly = np.asarray(tri_poly, np.int64)
         if tri_poly.shape != (m,):
             raise ConformalError(f"tri_poly must have one polygon index per triangle ({m}), got shape "
                                  f"{tri_poly.shape}")
-    report_progress(0.02, 'cutting along seams')
     seams = seam_pairs(seams, n)
-    cut = cut_along_seams(F, n, seams, strict_seams)
-    cut_info = {}
-    if holes == 'cut':
-        extra = []
-        for i, faces in enumerate(cut.island_faces()):
-            Fi = cut.F[faces]
-            lo = cut.vert_start[i]
-            ni = cut.vert_start[i + 1] - lo
-            loops = topology.boundary_loops(Fi - lo, ni)
-            if len(loops) > 1:
-                paths = hole_cut_paths(V[cut.vert_of[lo:lo + ni]], Fi - lo, ni, loops)
-                got = [cut.vert_of[lo + p] for p in paths]
-                extra += got
-                cut_info[i] = {'mode': 'cut', 'cut': len(got), 'cut_edges': int(sum(len(p) for p in got))}
-        if extra:
-            seams = np.concatenate([seams] + extra)
-            cut = cut_along_seams(F, n, seams, strict_seams)     # the same islands, same order
+    if strict_seams:
+        _seam_halfedges(F, n, seams, True)             # a seam that is no edge of F is an error
+    # work in O(1) units whatever the mesh's (no under- or overflow); UVs are scaled back at the end
+    V, unit = normalise_scale(V)
+    R = repair(V, F)
+    repairs = list(R.repairs)
+    if edges is not None:
+        loose_e = loose_edge_count(edges, F)
+        if loose_e:
+            repairs.append({'repair': 'loose_edges_ignored', 'count': loose_e, 'note': 'edges in no face'})
+    if len(R.F) == 0:
+        raise ConformalError("mesh has no triangle with three different vertices", 'empty_mesh')
+    zero = degenerate_faces(R.V, R.F)
+    if zero.any():
+        repairs.append(zero_area_note(int(zero.sum())))
+    # seams on the repaired vertices: every repaired edge whose input vertices form a seam
+    n2 = len(R.V)
+    if len(seams):
+        H2 = topology.halfedges(R.F)
+        a, b = R.vert_map[H2[:, 0]], R.vert_map[H2[:, 1]]
+        hk = np.minimum(a, b) * n + np.maximum(a, b)
+        sk = np.minimum(seams[:, 0], seams[:, 1]) * n + np.maximum(seams[:, 0], seams[:, 1])
+        seams2 = np.unique(np.sort(H2[np.isin(hk, sk)], axis=1), axis=0)
+    else:
+        seams2 = np.zeros((0, 2), np.int64)
+    report_progress(0.02, 'cutting along seams')
+    cut = cut_along_seams(R.F, n2, seams2, strict=False)
     island_faces = cut.island_faces()
-    n_isl = cut.n_islands
-    areas = np.bincount(cut.face_island, face_areas(V, F), minlength=n_isl)
-    uv = np.zeros((len(cut.vert_of), 2))
-    ok = np.ones(m, bool)
-    weights = np.cumsum([0] + [len(f) for f in island_faces]) / m
-    reports, boxes, failed = [], [], []
+    n_cut = cut.n_islands
+    weights = np.cumsum([0] + [len(f) for f in island_faces]) / max(1, len(R.F))
+    tri_of = R.face_map                                  # input face of each repaired face
+    pieces = []                                          # (faces of R.F, Fp, vert_of (input), uv, rep)
     for i, faces in enumerate(island_faces):
         lo, hi = cut.vert_start[i], cut.vert_start[i + 1]
         Fi = cut.F[faces] - lo
-        Vi = V[cut.vert_of[lo:hi]]
-        desc = _describe(i, n_isl, faces, tri_poly)
+        Vi = R.V[cut.vert_of[lo:hi]]
+        desc = _describe(i, n_cut, tri_of[faces], tri_poly)
         base, span = 0.05 + 0.85 * weights[i], 0.85 * (weights[i + 1] - weights[i])
 
         def sub(f, msg, base=base, span=span, i=i):
-            report_progress(base + span * f, f"island {i + 1}/{n_isl}: {msg}")
+            report_progress(base + span * f, f"island {i + 1}/{n_cut}: {msg}")
 
-        rep = {'island': i + 1, 'triangles': len(faces), 'vertices': int(hi - lo)}
         try:
-            loops = topology.boundary_loops(Fi, hi - lo)
-            ui, r = _flatten_island(Vi, Fi, loops, holes, boundary, desc, sub, options)
-            rep.update(r)
-            if i in cut_info:          # (a hole left uncut would have been filled: keep both)
-                rep['holes'] = {**rep.get('holes', {}), **cut_info[i]}
-                rep['loops_before_cut'] = rep['loops'] + cut_info[i]['cut']
+            got = _solve_island(Vi, Fi, holes, boundary, desc, sub, options,
+                                poly=None if tri_poly is None else tri_poly[tri_of[faces]])
+            for fl, Fp, pv, ui, r in got:
+                pieces.append((faces[fl], Fp, R.vert_map[cut.vert_of[lo + pv]], ui, r, desc))
         except ConformalError as exc:
             if not exc.problem.startswith('island '):
                 exc = exc.with_context(desc)
-            if on_error == 'raise' or n_isl == 1:
+            if on_error == 'raise' or n_cut == 1:
                 raise exc from None
-            rep['error'] = str(exc)
-            rep['error_code'], rep['error_remedy'], rep['error_problem'] = exc.code, exc.remedy, exc.problem
-            failed.append(i)
-            ok[faces] = False
-            ui = np.zeros((hi - lo, 2))
-        rep['area_3d'] = float(areas[i])
-        if 'error' not in rep:
+            rep = {'error': str(exc), 'error_code': exc.code, 'error_remedy': exc.remedy,
+                   'error_problem': exc.problem}
+            used, Fl = np.unique(Fi, return_inverse=True)
+            pieces.append((faces, Fl.reshape(-1, 3), R.vert_map[cut.vert_of[lo + used]],
+                           np.zeros((len(used), 2)), rep, desc))
+    n_isl = len(pieces)
+    areas_in = face_areas(V, F)
+    uv_parts, vo_parts, reports, boxes = [], [], [], []
+    Fout = np.zeros((m, 3), np.int64)
+    face_island = np.zeros(m, np.int64)
+    ok = np.ones(m, bool)
+    start = 0
+    for i, (faces, Fp, vo, ui, rep, _desc) in enumerate(pieces):
+        rep = {'island': i + 1, 'triangles': len(faces), 'vertices': int(len(vo)), **rep}
+        rows = tri_of[faces]
+        Fg = Fp + start
+        flipped = R.flipped[faces]
+        Fg = np.where(flipped[:, None], Fg[:, [0, 2, 1]], Fg)        # back to the input's corner order
+        Fout[rows] = Fg
+        face_island[rows] = i
+        rep['area_3d'] = float(areas_in[rows].sum())
+        if 'error' in rep:
+            ok[rows] = False
+        else:
             if island_scale == 'normalise':
-                ui = ui * np.sqrt(areas.mean() / areas[i])
+                ui = ui * np.sqrt(areas_in.sum() / n_isl / max(rep['area_3d'], 1e-300))
             lo_uv, hi_uv = ui.min(0), ui.max(0)
             if hi_uv[1] - lo_uv[1] > hi_uv[0] - lo_uv[0]:      # lie wide: rotate by 90 degrees
                 ui = np.stack([ui[:, 1], -ui[:, 0]], 1)
             ui = ui - ui.min(0)
-        uv[lo:hi] = ui
+        uv_parts.append(ui)
+        vo_parts.append(vo)
         reports.append(rep)
         boxes.append(ui.max(0) if 'error' not in rep else np.zeros(2))
+        start += len(vo)
+    uv = np.concatenate(uv_parts)
+    vert_of = np.concatenate(vo_parts)
+    vert_island = np.repeat(np.arange(n_isl), [len(v) for v in vo_parts])
+    # the dropped input faces share the split vertices of their kept twins, or of their vertices
+    if len(R.dropped):
+        first = _lowest_split_vertex(vert_of, n)
+        D = F[R.dropped]
+        ids = first[D]
+        tw = R.twin_of_dropped
+        has = tw >= 0
+        if has.any():
+            T = Fout[tw[has]]                                       # split ids of the twin's corners
+            Tv = F[tw[has]]
+            match = D[has][:, :, None] == Tv[:, None, :]            # (k,3,3)
+            ids[has] = np.take_along_axis(T, match.argmax(axis=2), axis=1)
+        bad = (ids < 0).any(axis=1)
+        ids[ids < 0] = 0
+        Fout[R.dropped] = ids
+        face_island[R.dropped] = vert_island[ids[:, 0]]
+        ok[R.dropped] = ~bad
+    failed = [i for i, r in enumerate(reports) if 'error' in r]
     if len(failed) == n_isl:
-        first = reports[0]
-        raise ConformalError(f"no island could be flattened; the first error: {first['error_problem']}",
-                             first['error_code'], first['error_remedy'])
+        first_r = reports[0]
+        raise ConformalError(f"no island could be flattened; the first error: {first_r['error_problem']}",
+                             first_r['error_code'], first_r['error_remedy'])
     report_progress(0.92, 'packing islands')
     boxes = np.array(boxes)
     good = np.array(['error' not in r for r in reports])
     size = np.sqrt((boxes[good, 0] * boxes[good, 1]).sum())
     layout = (float(boxes[:, 0].max()), float(boxes[:, 1].max()))
+    starts = np.r_[0, np.cumsum([len(v) for v in vo_parts])]
     if pack:
         gap = margin * size / max(1e-12, 1 - 2 * margin)
         off, layout = shelf_pack(boxes[good], gap)
         for k, i in enumerate(np.nonzero(good)[0]):
-            lo, hi = cut.vert_start[i], cut.vert_start[i + 1]
-            uv[lo:hi] += off[k]
+            uv[starts[i]:starts[i + 1]] += off[k]
     if fit == 'unit_square':
         uv /= max(layout) if max(layout) > 0 else 1.0
     else:
         uv *= unit
     for r in reports:
         r['area_3d'] *= unit * unit
-    keep = good[cut.vert_island]
-    uv[~keep] = 0.0
+    uv[~good[vert_island]] = 0.0
     rep_ok = [r for r in reports if 'error' not in r]
+    split_notes = sorted({r['split_from_overlap'] for r in rep_ok if 'split_from_overlap' in r})
+    if split_notes:
+        repairs.append({'repair': 'islands_split_for_overlap', 'count': len(split_notes),
+                        'note': '; '.join(split_notes)})
+    fallbacks = [r for r in rep_ok if 'fallback_boundary' in r]
+    if fallbacks:
+        repairs.append({'repair': 'boundary_fallback', 'count': len(fallbacks),
+                        'note': f"islands whose {boundary} map overlapped or folded use the area map"})
+    warnings = []
+    for r in reports:
+        for w in r.get('warnings', []):
+            warnings.append(f"island {r['island']}: {w}")
+        if 'error' in r:
+            warnings.append(f"skipped: {r['error']}")
     summary = {
         'islands': n_isl, 'flattened': len(rep_ok), 'failed': len(failed), 'boundary': boundary,
         'holes': holes, 'island_scale': island_scale, 'packed': bool(pack), 'fit': fit,
-        'triangles': m, 'vertices': n, 'split_vertices': int(len(cut.vert_of)),
+        'triangles': m, 'vertices': n, 'split_vertices': int(len(vert_of)),
         'seams': int(len(seams)),
-        'holes_filled': int(sum(r.get('holes', {}).get('filled', 0) for r in rep_ok)),
+        'holes_filled': int(sum(r.get('holes', {}).get('filled', 0) for r in rep_ok
+                                if r.get('holes', {}).get('mode') == 'fill')),
         'holes_cut': int(sum(r.get('holes', {}).get('cut', 0) for r in rep_ok)),
         'flips': int(sum(r['flips'] for r in rep_ok)),
         'overlaps': int(sum(r['overlaps'] for r in rep_ok)),
@@ -522,8 +834,10 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='fill', island_scale='tru
         'mu_ratio_worst': float(min(r['mu_ratio'] for r in rep_ok)),
         'pack_efficiency': float((boxes[good, 0] * boxes[good, 1]).sum() / max(1e-300, layout[0] * layout[1]))
         if pack else None,
+        'repairs': repairs,
+        'warnings': warnings,
         'seconds': round(time.perf_counter() - t0, 4),
     }
     report_progress(1.0, 'done')
-    return UnwrapResult(uv=uv, F=cut.F, vert_of=cut.vert_of, face_island=cut.face_island, ok=ok,
+    return UnwrapResult(uv=uv, F=Fout, vert_of=vert_of, face_island=face_island, ok=ok,
                         islands=reports, report=summary)

@@ -35,8 +35,10 @@ from ..errors import ConformalError
 from ..disk.flatten import flatten
 from ..mesh import topology
 from ..mesh.geometry import face_areas
+from ..mesh.repair import repair
 from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, vertex_mu
-from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_loose_edges, check_mesh, normalise_scale
+from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_mesh, degenerate_faces, loose_edge_count,
+                             normalise_scale)
 from .islands import boundary_crossings, seam_pairs, shelf_pack
 from .islands import unwrap as unwrap_islands
 
@@ -107,14 +109,13 @@ def _select(V, F, faces, seams):
     return sel, used, V[used], remap[F[sel]], S
 
 
-def _plain_disk(V, F, seams, max_faces, allow_loose):
+def _plain_disk(V, F, seams, max_faces):
     """(True, boundary loops) if the mesh is clean, one piece and one disk without seams; else
     (False, None): the island pipeline then handles it (repairs, holes, or a precise error)."""
     if len(seams):
         return False, None
     try:
-        info = check_mesh(V, F, kind='surface', max_faces=max_faces, allow_loose=allow_loose,
-                          allow_parts=True)
+        info = check_mesh(V, F, kind='surface', max_faces=max_faces, allow_parts=True)
     except ConformalError:
         return False, None
     if len(info.loops) != 1 or info.euler != 1:
@@ -125,11 +126,20 @@ def _plain_disk(V, F, seams, max_faces, allow_loose):
 
 
 def _measure(V, F, uv_corner):
-    """docs/math.md section 3 measures of the triangles ``F`` (k,3) under the corner UVs ``uv_corner``
-    (k,3,2), as a triangle soup (split vertices need no bookkeeping). Returns (report dict, mu (k,))."""
+    """docs/math.md §3 measures of the triangles ``F`` (k,3) under the corner UVs ``uv_corner``
+    (k,3,2), as a triangle soup (split vertices need no bookkeeping). Zero-area triangles (kept for
+    the solve by the mollification) have no Jacobian: they are left out and get NaN mu. Returns
+    (report dict, mu (k,))."""
     k = len(F)
-    P = normalise_scale(V)[0][F].reshape(-1, 3)        # measures are scale invariant; no overflow
-    return measures_from_jacobians(*jacobians(P, np.arange(3 * k).reshape(k, 3), uv_corner.reshape(-1, 2)))
+    Vn = normalise_scale(V)[0]                          # measures are scale invariant; no overflow
+    good = ~degenerate_faces(Vn, F)
+    g = int(good.sum())
+    P = Vn[F[good]].reshape(-1, 3)
+    meas, mu_g = measures_from_jacobians(*jacobians(P, np.arange(3 * g).reshape(g, 3),
+                                                    uv_corner[good].reshape(-1, 2)))
+    mu = np.full(k, np.nan)
+    mu[good] = mu_g
+    return meas, mu
 
 
 def island_warnings(rep: dict, desc: str) -> list:
@@ -167,10 +177,10 @@ def _disk(V, F, loops, boundary, fit, max_faces, progress, options):
     return res.uv, res.mu, rep
 
 
-def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'uniform', holes: str = 'fill',
+def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'uniform', holes: str = 'auto',
            fit: str = 'unit_square', island_scale: str = 'true', pack: bool = True, margin: float = 0.01,
            on_error: str = 'raise', max_faces: int | None = DEFAULT_MAX_FACES, edges=None,
-           allow_loose: bool = False, progress: Callable[[float, str], None] | None = None,
+           allow_loose: bool = True, progress: Callable[[float, str], None] | None = None,
            cones: int | str | None = None, target_ratio: float = 0.5, max_cones: int = 48,
            **options) -> UnwrapResult:
     """Unwrap the triangle mesh ``V`` (n,3) float, ``F`` (m,3) int (counter-clockwise) to UVs.
@@ -178,7 +188,8 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
     seams: (k,2) int vertex pairs cut open, or None. faces: optional (m,) bool, only these triangles
     are unwrapped (the others get NaN UVs; seams outside them are ignored). tri_poly: optional (m,)
     polygon of each triangle, to name polygons in messages. boundary: 'uniform', 'area' or 'free'.
-    holes: 'fill', 'cut' or 'error'. fit: 'unit_square' or 'true_scale' (mesh units, UV area = 3D
+    holes: 'auto' (fill a cap, cut a tube: both are tried and the better map is kept), 'fill', 'cut'
+    or 'error'. fit: 'unit_square' or 'true_scale' (mesh units, UV area = 3D
     area). island_scale: 'true' (one texel density) or 'normalise' (equal UV area per island). pack:
     shelf-pack several islands without overlap, ``margin`` a fraction of the layout size (one island
     is never packed). on_error: 'raise' or 'skip' (islands that cannot be flattened are left out,
@@ -215,17 +226,20 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
             raise ConformalError(f"cones must be 'auto', a cone budget (an integer >= 0) or None, got {cones!r}")
         if cones == 0:
             cones = 'auto'
-        if edges is not None and whole:
-            check_loose_edges(edges, F)
-    disk, loops = (False, None) if cones is not None else _plain_disk(Vs, Fs, Ss, max_faces, allow_loose)
+    disk, loops = (False, None) if cones is not None else _plain_disk(Vs, Fs, Ss, max_faces)
+    if disk and edges is not None and whole and loose_edge_count(edges, F):
+        disk = False                     # the island pipeline lists the loose edges it ignores
     if cones is not None:
-        keep = np.zeros(len(Vs), bool)
-        keep[Fs.ravel()] = True
-        if not keep.all() and not allow_loose:
-            check_mesh(Vs, Fs, kind='surface', max_faces=max_faces, allow_parts=True)   # names them
-        uv_corner_s, isl, islands, seams_s, cone_s = cone_layout(
-            Vs, Fs, cones=cones, target_ratio=target_ratio, max_cones=max_cones, fit=fit, pack=pack,
-            margin=margin, progress=progress)
+        fixed = repair(Vs, Fs)                  # messy input: the same internal repairs as islands
+        uv_r, isl_r, islands, seams_r, cone_r = cone_layout(
+            fixed.V, fixed.F, cones=cones, target_ratio=target_ratio, max_cones=max_cones, fit=fit,
+            pack=pack, margin=margin, progress=progress)
+        uv_corner_s = np.full((len(Fs), 3, 2), np.nan)
+        uv_corner_s[fixed.face_map] = np.where(fixed.flipped[:, None, None], uv_r[:, [0, 2, 1]], uv_r)
+        isl = np.full(len(Fs), -1, np.int64)
+        isl[fixed.face_map] = isl_r
+        seams_s = np.unique(np.sort(fixed.vert_map[seams_r], axis=1), axis=0) if len(seams_r) else seams_r
+        cone_s = [(int(fixed.vert_map[v]), k) for v, k in cone_r]
         ok = np.isfinite(uv_corner_s).all(axis=(1, 2))
         uv_s, F_uv_s = _shared_uv(Fs, uv_corner_s)
         meas, mu_ok = _measure(Vs, Fs[ok], uv_corner_s[ok])
@@ -238,11 +252,9 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
                    'bound_vertex': None, 'vertex_ratio': None, 'cones': len(cone_list),
                    'seam_edges': int(len(auto_seams)),
                    'seam_length': float(sum(r['seam_length'] for r in islands)),
-                   'seam_fraction': _seam_fraction(V, F, auto_seams),
+                   'seam_fraction': _seam_fraction(V, F, auto_seams), 'repairs': fixed.repairs,
                    **{k: meas[k] for k in MEASURE_KEYS}}
     elif disk:
-        if edges is not None and whole:
-            check_loose_edges(edges, F)
         uv_s, mu_s, rep = _disk(Vs, Fs, loops, boundary, fit, max_faces, progress, options)
         uv_corner_s = uv_s[Fs]
         F_uv_s, ok, isl = Fs, np.ones(len(Fs), bool), np.zeros(len(Fs), np.int64)

@@ -4,6 +4,7 @@ Each command lives in its own module with ``add_arguments(parser)`` and ``run(ar
 table below names them, and modules are imported only when their command runs."""
 import argparse
 import importlib
+import os
 import sys
 
 from ..errors import ConformalError
@@ -11,7 +12,7 @@ from ..errors import ConformalError
 # command name -> (module, one-line help)
 COMMANDS = {
     'flatten': ('flatten', 'flatten a disk mesh conformally and write an OBJ with UVs'),
-    'make-surface': ('surface', 'write one of the test surfaces (DESIGN.md section 7)'),
+    'make-surface': ('surface', 'write one of the test surfaces (docs/math.md, test surfaces)'),
     'unwrap': ('unwrap', 'cut a mesh into islands along seams, flatten and pack them, write per-corner UVs'),
     'sphere': ('sphere', 'map a closed genus-0 mesh conformally to the unit sphere (OBJ out)'),
     'reconstruct': ('reconstruct', 'recover a metric on a disk mesh from travel times (CSV)'),
@@ -47,6 +48,15 @@ def main(argv=None):
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader went away (``... --json | head -1``): stop quietly, and keep Python from
+        # complaining again when it flushes stdout at exit
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        except OSError:
+            pass
+        return 0
     except MemoryError:
         print("error: out of memory: the mesh is too large for this machine", file=sys.stderr)
         return 2

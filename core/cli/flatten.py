@@ -1,5 +1,6 @@
 """``python -m core flatten IN.obj OUT.obj [--boundary free|area|uniform] [--json]``."""
 import json
+import sys
 
 import numpy as np
 
@@ -31,4 +32,6 @@ def run(args):
         r = res.report
         print(f"{args.boundary}: mu_ratio {r['mu_ratio']:.4f}, qc_mean {r['qc_mean']:.4f}, "
               f"flips {r['flips']}, {r['seconds']['total']:.2f} s")
+    for w in res.report.get('warnings', []):
+        print(f"warning: {w}", file=sys.stderr)
     return 0

@@ -30,9 +30,9 @@ def add_arguments(p):
                    help="use the input's own UV seams (edges where the vt indices differ across the edge)")
     p.add_argument('--boundary', choices=BOUNDARY_MODES, default='uniform',
                    help='boundary mode of every island (default: uniform)')
-    p.add_argument('--holes', choices=HOLE_MODES, default='fill',
-                   help='islands with holes: fill them virtually (default), cut them open to the outer '
-                        'boundary, or stop with an error')
+    p.add_argument('--holes', choices=HOLE_MODES, default='auto',
+                   help='islands with holes: auto (default: fill or cut, whichever maps better), fill them '
+                        'virtually, cut them open to the outer boundary, or stop with an error')
     p.add_argument('--island-scale', choices=ISLAND_SCALES, default='true',
                    help='true: one texel density on all islands (default); normalise: equal UV area each')
     p.add_argument('--fit', choices=FITS, default='unit_square',
@@ -127,14 +127,11 @@ def run(args):
         seams = seams_from_corner_ids(F, mesh.corner_uvs[tri_corners], n)
     else:
         seams = None
-    if len(mesh.lines) and not args.ignore_loose:
-        raise ConformalError(f"{args.input} has {len(mesh.lines)} loose edge(s) ('l' lines), e.g. "
-                             f"{mesh.lines[0, 0] + 1}-{mesh.lines[0, 1] + 1}: delete loose geometry, "
-                             "or pass --ignore-loose")
     res = unwrap(mesh.V, F, seams=seams, boundary=args.boundary, holes=args.holes,
                  island_scale=args.island_scale, pack=not args.no_pack, margin=args.margin, fit=args.fit,
                  max_faces=args.max_faces, allow_loose=args.ignore_loose,
-                 on_error='skip' if args.skip_bad else 'raise', tri_poly=tri_poly, cones=args.cones,
+                 on_error='skip' if args.skip_bad else 'raise', tri_poly=tri_poly,
+                 edges=mesh.lines if len(mesh.lines) else None, cones=args.cones,
                  target_ratio=args.target_ratio, max_cones=args.max_cones)
     # per-corner vt: every polygon corner takes the split vertex of its triangles' corner
     corner_vt = np.full(len(mesh.corner_verts), -1, np.int64)
@@ -158,6 +155,8 @@ def run(args):
               f"{r['holes_filled']}, cut {r['holes_cut']}: flips {r['flips']}, overlaps {r['overlaps']}, "
               f"qc_mean {r['qc_mean']:.4f} (worst island {r['qc_mean_worst']:.4f}), mu_ratio "
               f"{r['mu_ratio']:.4f} (worst island {r['mu_ratio_worst']:.4f}), {r['seconds']:.2f} s")
+    for rp in r.get('repairs', []):
+        print(f"repaired: {rp['repair']} ({rp['count']}): {rp['note']}", file=sys.stderr)
     for w in res.warnings:
         print(f"warning: {w}", file=sys.stderr)
     return 0

@@ -1,8 +1,8 @@
-"""Conformal flattening of a disk with boundary scale factors (DESIGN.md section 2).
+"""Conformal flattening of a disk with boundary scale factors (docs/math.md).
 
 Sign convention: ``u = log mu`` is the log of the local scale (UV length per surface length). With
 the positive semidefinite ``L`` the flat-target Yamabe equation reads ``L u = -Omega`` inside and the
-target boundary curvature is ``k~ = k + (L u)_B``. DESIGN.md section 2 writes steps 2-3 for ``-u``;
+target boundary curvature is ``k~ = k + (L u)_B``. docs/math.md writes steps 2-3 for ``-u``;
 the two agree for ``u_B = 0`` and the certified bound is the same, but the lengths
 ``l~ = exp((u_i + u_j)/2) l`` need ``u = log mu``.
 
@@ -23,15 +23,19 @@ import numpy as np
 from ..errors import ConformalError
 from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian, face_gradients, gradient, divergence
-from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians
+from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians, signed_uv_areas
+from ..mesh.intrinsic import intrinsic_delaunay
 from ..mesh.solve import Factor, factor_all
 from .lscm import lscm
 from .uniform import optimise, vertex_bound
-from ..mesh.validate import check_mesh, normalise_scale, DEFAULT_MAX_FACES
+from ..mesh.validate import check_mesh, degenerate_faces, normalise_scale, DEFAULT_MAX_FACES
 
 BOUNDARY_MODES = ('free', 'area', 'uniform')
 FIT_MODES = ('true_scale', 'unit_square')
+OPERATOR_MODES = ('auto', 'intrinsic', 'extrinsic')
 AUTO_BOUND_FACES = 20_000      # above this the certified bound is computed only on request
+QC_WARN = 1.5                  # a map with qc_mean above this gets a warning
+MU_WARN = 1e-4                 # ... and one with mu_ratio below this (texel density varies 10^4-fold)
 
 
 @dataclass
@@ -55,14 +59,36 @@ class DiskSystem:
     defect, ``k`` (nb,) boundary turning angles, ``l`` (nb,) boundary edge lengths (edge j runs from
     B[j] to B[j+1])."""
 
-    def __init__(self, V, F, loop, neumann=True):
+    def __init__(self, V, F, loop, neumann=True, operators='auto'):
+        if operators not in OPERATOR_MODES:
+            raise ConformalError(f"unknown operators {operators!r}: use one of {', '.join(OPERATOR_MODES)}")
         self.V, self.F = V, F
         n = self.n = len(V)
         self.B = np.asarray(loop, np.int64)
         mask = np.zeros(n, bool)
         mask[self.B] = True
         self.I = np.nonzero(~mask)[0]
-        self.L = cotan_laplacian(V, F)
+        self.G, self.N, self.A = face_gradients(V, F)
+        self._T = None
+        self.operators = {'mode': operators, 'intrinsic': False}
+        if operators != 'extrinsic':
+            # mollify only when asked ('intrinsic', which flatten() uses on zero-area triangles): on
+            # valid needles it would bend an exact map (a flat needle strip maps isometrically)
+            T = intrinsic_delaunay(V, F, mollify_delta=1e-4 if operators == 'intrinsic' else 0.0)
+            rep = T.report
+            use = operators == 'intrinsic' or rep['negative_before'] > rep['negative_boundary_after']
+            if use:
+                self._T = T
+                self.operators.update(intrinsic=True, **{k: T.report[k] for k in (
+                    'flips', 'eps', 'negative_before', 'negative_after', 'converged')})
+            else:
+                self.operators['negative_weights'] = T.report['negative_before']
+        if self._T is not None:
+            self.L = self._T.cotan_laplacian().tocsr()
+            s = self._T.angle_sums()
+        else:
+            self.L = cotan_laplacian(V, F)
+            s = angle_sums(V, F)
         LI = self.L[self.I]
         self.L_II = LI[:, self.I].tocsc()
         self.L_IB = LI[:, self.B].tocsc()
@@ -74,11 +100,9 @@ class DiskSystem:
         else:
             self._II = Factor(self.L_II) if len(self.I) else None
             self._neumann = None
-        s = angle_sums(V, F)
         self.Omega = np.where(mask, 0.0, 2 * np.pi - s)
         self.k = np.pi - s[self.B]
         self.l = np.linalg.norm(V[np.roll(self.B, -1)] - V[self.B], axis=1)
-        self.G, self.N, self.A = face_gradients(V, F)
 
     # --- step 2: interior log scale factors -----------------------------------------------------
     def solve_II(self, b):
@@ -129,25 +153,36 @@ class DiskSystem:
         ``L y = div(n x grad x)``, with y fixed at one boundary vertex."""
         if self._neumann is None:
             self._neumann = Factor(self.L[self._keep][:, self._keep])
-        X = np.cross(self.N, gradient(self.G, self.F, x))
-        b = divergence(self.G, self.F, self.A, X, self.n)
+        if self._T is not None:
+            b = self._T.divergence(self._T.rotated(self._T.gradient(x)))
+        else:
+            X = np.cross(self.N, gradient(self.G, self.F, x))
+            b = divergence(self.G, self.F, self.A, X, self.n)
         y = np.zeros(self.n)
         y[self._keep] = self._neumann.solve(b[self._keep])
         return y
 
     def extend(self, P):
-        """UV (n,2) from the boundary polygon ``P`` (nb,2): x harmonic, y its conjugate. The result
-        is shifted so that y matches the polygon on average along the boundary."""
-        x = self.harmonic(P[:, 0])
-        y = self.conjugate(x)
-        y += np.mean(P[:, 1] - y[self.B])
-        return np.stack([x, y], axis=1)
+        """UV (n,2) from the boundary polygon ``P`` (nb,2). Both ways of extending are averaged: x
+        harmonic with y its conjugate, and y harmonic with x its negative conjugate (each shifted to
+        match the polygon on average along the boundary). Each alone turns with the polygon only up
+        to discretisation error; the average ``(A(Px) + i A(Py)) / 2`` with ``A(f) = h(f) + i c(h(f))``
+        is exactly rotation-equivariant, so the map does not depend on where the boundary loop starts
+        (i.e. on the vertex numbering)."""
+        H = self.harmonic(P)                                    # (n,2): h(Px), h(Py)
+        x1, y2 = H[:, 0], H[:, 1]
+        y1 = self.conjugate(x1)
+        x2 = -self.conjugate(y2)
+        y1 += np.mean(P[:, 1] - y1[self.B])
+        x2 += np.mean(P[:, 0] - x2[self.B])
+        return np.stack([0.5 * (x1 + x2), 0.5 * (y1 + y2)], axis=1)
 
     def jacobians(self, uv):
         """Per-triangle Jacobians (m,2,2) of a UV map (n,2); the triangles' own frames are cached."""
         if getattr(self, '_frames', None) is None:
             self._frames, _ = local_frames(self.V, self.F)
-        return jacobians_from_frames(self._frames, self.F, uv)
+        with np.errstate(divide='ignore', invalid='ignore'):       # zero-area triangles: inf/NaN
+            return jacobians_from_frames(self._frames, self.F, uv)
 
     def map_from_u(self, u):
         """UV (n,2) of the conformal map with log scale factor ``u`` (n,)."""
@@ -167,6 +202,11 @@ def normalise_uv(V, F, uv, fit='true_scale'):
     C = (uv * np.bincount(F.ravel(), np.repeat(np.abs(a), 3), minlength=len(uv))[:, None]).T @ uv
     w, R = np.linalg.eigh(C)
     R = R[:, ::-1]
+    # an eigenvector's sign is arbitrary: choose the one with the positive third moment along the
+    # main axis, so that the result does not depend on the order of vertices or faces
+    wt = np.bincount(F.ravel(), np.repeat(np.abs(a), 3), minlength=len(uv))
+    if (wt * (uv @ R[:, 0]) ** 3).sum() < 0:
+        R[:, 0] *= -1
     if np.linalg.det(R) < 0:
         R[:, 1] *= -1
     uv = uv @ R
@@ -177,8 +217,23 @@ def normalise_uv(V, F, uv, fit='true_scale'):
     return (uv - lo) / size + (1 - (hi - lo) / size) / 2
 
 
+def _warnings(report, qc_limit=QC_WARN):
+    """The honest-report warnings (list of str) for a measured map's ``report``."""
+    w = []
+    if report.get('flips', 0):
+        w.append(f"{report['flips']} flipped (folded) UV triangle(s)")
+    if not report.get('qc_mean', 1.0) <= qc_limit:
+        w.append(f"poor conformality: qc_mean {report.get('qc_mean'):.3f} is above {qc_limit}")
+    if not np.isfinite(report.get('mu_ratio', np.nan)) or not report.get('mu_ratio', 0) > 0:
+        w.append("the conformal factor is not finite and positive on every triangle")
+    elif report['mu_ratio'] < MU_WARN:
+        w.append(f"extreme scale variation: mu_ratio {report['mu_ratio']:.2g} (texel density varies more "
+                 f"than {1 / MU_WARN:.0e}-fold); mark seams to cut long or closed parts apart")
+    return w
+
+
 def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FACES, bound=None,
-            progress=None, real_faces=None, **options):
+            progress=None, real_faces=None, operators='auto', **options) -> FlattenResult:
     """Flatten a disk-topology triangle mesh conformally.
 
     V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise. boundary: 'free', 'area' or
@@ -187,8 +242,38 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     linear program fails the report says so and the map is still returned). progress: optional
     callable ``progress(fraction, message)``. real_faces: optional (m,) bool; only these triangles
     count in the objective and the measures (the others are temporary fill, e.g. of holes).
-    Extra ``options`` go to ``core.uniform.optimise``.
-    Returns ``FlattenResult``. Raises ``ConformalError`` on bad input."""
+    operators: 'auto' (intrinsic Delaunay operators where the mesh has non-Delaunay edges or needs
+    mollification, docs/math.md), 'intrinsic' (always) or 'extrinsic' (the mesh's own cotan weights).
+    Zero-area triangles are accepted: the intrinsic mollification gives them a valid metric, and they
+    are left out of the objective and the measures (``report['degenerate_faces']``).
+    Extra ``options`` go to ``core.disk.uniform.optimise``.
+    Returns ``FlattenResult``; ``report['warnings']`` (list of str) lists flips, qc_mean above 1.5,
+    fallbacks. Raises ``ConformalError`` on bad input."""
+    # LSCM has no maximum principle to restore and measures slightly worse on the intrinsic
+    # triangulation of smooth grids (bench/flatten_table.py): 'auto' tries the mesh's own weights first
+    first, second = ('extrinsic', 'intrinsic') if boundary == 'free' else ('auto', 'extrinsic')
+    res = _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces,
+                   first if operators == 'auto' else operators, **options)
+    r = res.report
+    if operators == 'auto' and r['operators'].get('intrinsic') != (second == 'intrinsic') and \
+            not r.get('degenerate_faces') and (r['flips'] or not r['qc_mean'] <= QC_WARN or 'fallback' in r):
+        # the first operators did not give a clean map here: try the others and keep the better
+        alt = _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, second, **options)
+        if _quality_key(alt.report) < _quality_key(r):
+            alt.report['operators']['tried_first'] = {k: r[k] for k in ('flips', 'qc_mean', 'mu_ratio')}
+            return alt
+    return res
+
+
+def _quality_key(r):
+    """Sort key of a measured map report (lower is better): flips, qc_mean over budget, -mu_ratio."""
+    mu = r.get('mu_ratio', 0.0)
+    return (r.get('flips', 0) + r.get('degenerate_flips', 0), not r.get('qc_mean', np.inf) <= QC_WARN,
+            -(mu if np.isfinite(mu) else 0.0))
+
+
+def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operators, **options):
+    """``flatten`` with one choice of operators."""
     if boundary not in BOUNDARY_MODES:
         raise ConformalError(f"unknown boundary mode {boundary!r}: use one of {', '.join(BOUNDARY_MODES)}")
     if fit not in FIT_MODES:
@@ -196,21 +281,30 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     report_progress = progress or (lambda f, msg: None)
     timings = {}
     t0 = time.perf_counter()
-    info = check_mesh(V, F, kind='disk', max_faces=max_faces)
+    info = check_mesh(V, F, kind='disk', max_faces=max_faces, allow_degenerate=True)
     F = np.asarray(F, np.int64)
     # work in units where the mesh spans [-1,1]: the same numbers at any scale (1e-100 or 1e100)
     V, unit = normalise_scale(np.asarray(V, np.float64))
     mask = None if real_faces is None else np.asarray(real_faces, bool)
     if mask is not None and (mask.shape != (len(F),) or not mask.any()):
         raise ConformalError("real_faces must be one boolean per triangle, with at least one True")
+    warnings = []
+    degenerate = degenerate_faces(V, F)
+    if degenerate.any():
+        mask = ~degenerate if mask is None else mask & ~degenerate
+        if not mask.any():
+            raise ConformalError("every triangle has zero area", 'degenerate', 'clean_mesh')
+        operators = 'intrinsic'
     timings['check'] = time.perf_counter() - t0
     report_progress(0.05, 'factorising the Laplacian')
     t = time.perf_counter()
-    system = DiskSystem(V, F, info.boundary, neumann=boundary != 'free')
+    system = DiskSystem(V, F, info.boundary, neumann=boundary != 'free', operators=operators)
     timings['factor'] = time.perf_counter() - t
     report_progress(0.25, 'solving')
     report = {'boundary': boundary, 'vertices': len(V), 'faces': len(F),
-              'boundary_vertices': int(len(info.boundary))}
+              'boundary_vertices': int(len(info.boundary)), 'operators': system.operators}
+    if degenerate.any():
+        report['degenerate_faces'] = int(degenerate.sum())
     u = None
     t = time.perf_counter()
     if boundary == 'free':
@@ -219,11 +313,20 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
         u = system.yamabe(np.zeros(len(system.B)))
         uv = system.map_from_u(u)
     else:
-        u, uv, opt = optimise(system, progress=report_progress, real_faces=mask, **options)
-        report.update(opt)
+        try:
+            u, uv, opt = optimise(system, progress=report_progress, real_faces=mask, **options)
+            report.update(opt)
+        except ConformalError as exc:
+            if exc.code not in ('invalid_input', 'solve_failed', 'degenerate') and 'folds' not in exc.problem:
+                raise
+            # the area map already folds: keep the better of it and LSCM, and say so
+            u, uv, which = _fallback(system, V, mask)
+            warnings.append(f"the uniform optimiser could not start ({exc.problem}); the {which} map "
+                            "is returned instead")
+            report['fallback'] = which
     timings['solve'] = time.perf_counter() - t
     if bound is None:
-        bound = boundary == 'uniform' and len(F) <= AUTO_BOUND_FACES
+        bound = boundary == 'uniform' and len(F) <= AUTO_BOUND_FACES and 'fallback' not in report
     if bound:
         report_progress(0.9, 'certifying the bound')
         t = time.perf_counter()
@@ -239,6 +342,9 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     J, A = system.jacobians(uv), system.A
     measured, mu_real = measures_from_jacobians(*((J, A) if mask is None else (J[mask], A[mask])))
     report.update(measured)
+    if degenerate.any():
+        # a zero-area triangle has no Jacobian; it still must not turn over in UV
+        report['degenerate_flips'] = int((signed_uv_areas(uv, F[degenerate]) < 0).sum())
     if u is not None:
         used = np.unique(Fm)
         report['vertex_ratio'] = float(np.exp(u[used].min() - u[used].max()))
@@ -246,6 +352,25 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     mu[np.arange(len(F)) if mask is None else mask] = mu_real
     if fit == 'true_scale':
         uv = uv * unit
+    report['warnings'] = warnings + _warnings(report)
     timings['total'] = time.perf_counter() - t0
     report['seconds'] = {k: round(v, 4) for k, v in timings.items()}
     return FlattenResult(uv=uv, mu=mu, u=u, report=report)
+
+
+def _fallback(system, V, mask):
+    """When the area map folds: (u or None, uv (n,2), name) of whichever of the area map and LSCM has
+    fewer flipped triangles among ``mask`` (None: all)."""
+    keep = slice(None) if mask is None else mask
+    cands = []
+    try:
+        u = system.yamabe(np.zeros(len(system.B)))
+        cands.append((u, system.map_from_u(u), 'area'))
+    except ConformalError:
+        pass
+    cands.append((None, lscm(V, system.L, system.B), 'free (LSCM)'))
+
+    def folds(c):
+        a = signed_uv_areas(c[1], system.F[keep])
+        return int((a * np.sign(a.sum()) <= 0).sum())
+    return min(cands, key=folds)

@@ -75,7 +75,8 @@ def read_obj(path):
                 idx = [i - 1 if i > 0 else nv + i for i in idx]
                 lines.extend(zip(idx[:-1], idx[1:]))
         except (ValueError, IndexError) as exc:
-            raise ConformalError(f"{path} line {lineno}: cannot parse {line.strip()[:60]!r} ({exc})") from None
+            raise ConformalError(f"{path} line {lineno}: cannot parse {line.strip()[:60]!r} ({exc})") \
+                from None
     if not V or not sizes:
         raise ConformalError(f"{path} has no vertices or no faces: the mesh is empty")
     V = np.array(V, dtype=np.float64)
@@ -101,9 +102,9 @@ def write_obj(path, V, F, UV=None, UV_faces=None):
     V = np.asarray(V, np.float64)
     F = _index_lists(F)
     T = F if UV_faces is None else _index_lists(UV_faces)
-    lines = [f"v {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in V.tolist()]
+    lines = [f"v {x!r} {y!r} {z!r}\n" for x, y, z in V.tolist()]      # repr: exact round trip
     if UV is not None:
-        lines += [f"vt {u:.9g} {v:.9g}\n" for u, v in np.asarray(UV, float).tolist()]
+        lines += [f"vt {u!r} {v!r}\n" for u, v in np.asarray(UV, float).tolist()]
         lines += ['f ' + ' '.join(f"{i}/{j}" for i, j in zip(f, t)) + '\n' for f, t in zip(F, T)]
     else:
         lines += ['f ' + ' '.join(str(i) for i in f) + '\n' for f in F]
@@ -111,8 +112,9 @@ def write_obj(path, V, F, UV=None, UV_faces=None):
 
 
 def write_values(path, values):
-    """Write one number per line (``values`` (n,), ``%.9g``), atomically like ``write_text``."""
-    write_text(path, ''.join(f"{v:.9g}\n" for v in np.asarray(values, np.float64).tolist()))
+    """Write one number per line (``values`` (n,), ``repr``: exact round trip), atomically like
+    ``write_text``."""
+    write_text(path, ''.join(f"{v!r}\n" for v in np.asarray(values, np.float64).tolist()))
 
 
 def write_text(path, text):

@@ -1,4 +1,4 @@
-"""Per-triangle and per-vertex discrete geometry (DESIGN.md section 1).
+"""Per-triangle and per-vertex discrete geometry (docs/math.md, discrete setting).
 
 All functions take ``V`` (n,3) float64 positions and ``F`` (m,3) int64 triangles, counter-clockwise.
 Lengths are in the mesh's units, angles in radians.
@@ -40,7 +40,8 @@ def angle_sums(V, F, n=None):
 
 
 def angle_defect(V, F, boundary_mask):
-    """Discrete Gaussian curvature ``Omega`` (n,): 2*pi - angle sum at interior vertices, 0 on the boundary."""
+    """Discrete Gaussian curvature ``Omega`` (n,): 2*pi - angle sum at interior vertices, 0 on the
+    boundary."""
     s = angle_sums(V, F)
     return np.where(boundary_mask, 0.0, 2 * np.pi - s)
 

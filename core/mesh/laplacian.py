@@ -1,4 +1,4 @@
-"""Cotan Laplacian and per-triangle gradients (DESIGN.md section 1).
+"""Cotan Laplacian and per-triangle gradients (docs/math.md, discrete setting).
 
 ``L = D - W`` with ``W_ij = (cot a_ij + cot b_ij) / 2``: symmetric positive semidefinite, ``L @ 1 = 0``.
 It equals the P1 finite-element stiffness matrix, ``L_ij = sum_T A_T grad(phi_i) . grad(phi_j)``.

@@ -46,8 +46,9 @@ def unique_edges(F):
 
 
 def boundary_loops(F, n, twin=None):
-    """Boundary loops as a list of (k,) int arrays of vertex indices, longest first. Each loop runs
-    with the surface on its left (the faces' counter-clockwise direction)."""
+    """Boundary loops as a list of (k,) int arrays of vertex indices, longest first (ties: lowest
+    vertex first). Each loop runs with the surface on its left (the faces' counter-clockwise direction)
+    and starts at its lowest vertex index, so the result does not depend on the order of the faces."""
     H = halfedges(F)
     tw = twin_halfedges(F, n) if twin is None else twin
     B = H[tw < 0]
@@ -67,8 +68,10 @@ def boundary_loops(F, n, twin=None):
             v = nxt.get(v)
             if v is None:
                 break
-        loops.append(np.array(loop, dtype=np.int64))
-    loops.sort(key=len, reverse=True)
+        loop = np.array(loop, dtype=np.int64)
+        loops.append(np.roll(loop, -int(np.argmin(loop))))      # canonical start: the lowest vertex
+    # longest first, ties by the lowest vertex: the same loops whatever the face order
+    loops.sort(key=lambda lp: (-len(lp), int(lp[0])))
     return loops
 
 

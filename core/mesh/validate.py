@@ -65,10 +65,22 @@ def normalise_scale(V):
     return (V / 2 - centre / 2) / size * 2, size
 
 
-def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False, allow_parts=False):
-    """Validate a triangle mesh for ``kind`` 'disk' (one boundary loop, Euler characteristic 1),
-    'sphere' (closed, genus 0) or 'surface' (manifold only). ``allow_parts`` (only with 'surface')
-    accepts several connected pieces. Returns ``MeshInfo``."""
+def degenerate_faces(V, F, rel=1e-12):
+    """(m,) bool: triangles of ``F`` (m,3) with a repeated vertex or an area at most ``rel`` times the
+    squared mean edge length (scale-free: measured on the normalised mesh)."""
+    F = np.asarray(F, np.int64)
+    rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+    Vn = normalise_scale(np.asarray(V, np.float64))[0]   # the test must not under- or overflow
+    A = face_areas(Vn, F)
+    el = np.linalg.norm(Vn[F[:, 1]] - Vn[F[:, 0]], axis=1)
+    scale2 = max(float(np.mean(el)) ** 2, np.finfo(float).tiny)
+    return rep | (A <= rel * scale2)
+
+
+def check_arrays(V, F, max_faces=DEFAULT_MAX_FACES):
+    """The checks that have no repair: numeric arrays of the right shapes, not empty, at most
+    ``max_faces`` triangles, face indices of existing vertices, finite coordinates. Returns ``V`` (n,3)
+    float64 and ``F`` (m,3) int64; raises ``ConformalError``."""
     V, F = as_arrays(V, F)
     n, m = len(V), len(F)
     if max_faces is not None and m > max_faces:
@@ -83,12 +95,30 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
         bad = np.nonzero(~finite)[0]
         raise ConformalError(f"mesh has {_plural(len(bad), 'vertex')} with NaN or infinite coordinates "
                              f"(vertices {_examples(bad)})", 'bad_coordinates', 'fix_coordinates')
+    return V, F
+
+
+def loose_edge_count(E, F) -> int:
+    """How many edges of ``E`` (k,2) int belong to no triangle of ``F`` (m,3)."""
+    E = np.asarray(E, dtype=np.int64).reshape(-1, 2)
+    if len(E) == 0:
+        return 0
+    F = np.asarray(F, dtype=np.int64)
+    n = int(max(E.max(), F.max() if F.size else 0)) + 1
+    H = np.sort(topology.halfedges(F), axis=1) if F.size else np.zeros((0, 2), np.int64)
+    return int((~np.isin(np.sort(E, axis=1) @ np.array([n, 1]), H @ np.array([n, 1]))).sum())
+
+
+def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False, allow_parts=False,
+               allow_degenerate=False) -> MeshInfo:
+    """Validate a triangle mesh for ``kind`` 'disk' (one boundary loop, Euler characteristic 1),
+    'sphere' (closed, genus 0) or 'surface' (manifold only). ``allow_parts`` (only with 'surface')
+    accepts several connected pieces. ``allow_degenerate`` accepts zero-area triangles with three
+    different vertices (the caller handles them, e.g. by intrinsic mollification). Returns ``MeshInfo``."""
+    V, F = check_arrays(V, F, max_faces)
+    n, m = len(V), len(F)
     rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
-    Vn = normalise_scale(V)[0]            # the test must not under- or overflow at any mesh scale
-    A = face_areas(Vn, F)
-    el = np.linalg.norm(Vn[F[:, 1]] - Vn[F[:, 0]], axis=1)
-    scale2 = max(float(np.mean(el)) ** 2, np.finfo(float).tiny)
-    zero = rep | (A <= 1e-12 * scale2)
+    zero = rep if allow_degenerate else degenerate_faces(V, F)
     if zero.any():
         bad = np.nonzero(zero)[0]
         raise ConformalError(f"mesh has {_plural(len(bad), 'zero-area face')} (faces {_examples(bad)}): "
@@ -111,7 +141,8 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
         k = uh[hc > 1][:3]
         ex = ', '.join(f"({a}, {b})" for a, b in zip((k // n).tolist(), (k % n).tolist()))
         raise ConformalError(f"faces are not consistently oriented ({_plural(int((hc > 1).sum()), 'edge')} "
-                             f"run the same way in both faces, e.g. {ex}): recalculate normals", 'bad_topology')
+                             f"run the same way in both faces, e.g. {ex}): recalculate normals",
+                             'bad_topology')
     used = np.zeros(n, bool)
     used[F.ravel()] = True
     if not used.all() and not allow_loose:
@@ -123,7 +154,8 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
     if (fans > 1).any():
         bad = np.nonzero(fans > 1)[0]
         raise ConformalError(f"mesh has {_plural(len(bad), 'non-manifold vertex')} where separate "
-                             f"fans of faces touch (vertices {_examples(bad)}): split or rip them apart", 'bad_topology')
+                             f"fans of faces touch (vertices {_examples(bad)}): split or rip them apart",
+                             'bad_topology')
     ncomp, _ = topology.face_components(F, n, twin)
     if ncomp > 1 and not (allow_parts and kind == 'surface'):
         raise ConformalError(f"mesh has {ncomp} separate parts: flatten one connected piece at a time "
