@@ -37,7 +37,7 @@ def blender_unwrap(V, F, method='CONFORMAL', **kwargs):
 
 
 def corner_measures(V, F, uv_corners):
-    """DESIGN.md section 3 measures of a per-corner UV map (m,3,2)."""
+    """docs/math.md §3 measures of a per-corner UV map (m,3,2)."""
     from core.mesh.measures import uv_measures
     m = len(F)
     return uv_measures(V[F].reshape(-1, 3), np.arange(3 * m).reshape(m, 3), uv_corners.reshape(-1, 2))

@@ -1,4 +1,4 @@
-"""Issue 2 benchmark: the DESIGN.md section 8 table on the n = 65 test surfaces.
+"""Issue 2 benchmark: the README's results table on the n = 65 test surfaces.
 
 Rows: our ``free``, ``area`` and ``uniform`` modes, and Blender's own 'CONFORMAL' and 'ANGLE_BASED'
 unwraps run through bpy in this process. Columns: mu_ratio, p1/p99, qc_mean, qc_max, flips, seconds,

@@ -110,7 +110,8 @@ def main(argv=None):
 
     flat = {}
     for mode in ['AREA', 'FREE'] + (['UNIFORM'] if args.uniform else []):
-        flat[mode], _ = best(lambda: compute_flatten(md, mode, 'UNIT_SQUARE'), 1 if mode == 'UNIFORM' else 2)
+        flat[mode], _ = best(lambda mode=mode: compute_flatten(md, mode, 'UNIT_SQUARE'),
+                             1 if mode == 'UNIFORM' else 2)
 
     def edit_round_trip():
         with meshio.object_mode(obj):

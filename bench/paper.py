@@ -7,7 +7,8 @@ set beside our ``area`` and ``uniform`` modes.
 
 Rows (all on ``core.surfaces.make_surface('bump', n)``, n = 65 by default):
 
-- ``midedge, uncontrolled``: Polthier's midedge map, the paper's Algorithm 1 (``core.disk.midedge.midedge_map``).
+- ``midedge, uncontrolled``: Polthier's midedge map, the paper's Algorithm 1
+  (``core.disk.midedge.midedge_map``).
   The cut face is face 0, which touches the corner (-2,-2); ``u = -1, +1`` at its first two vertices;
   every other vertex, boundary included, has the natural condition. Sections 4 and Figures 1-2.
 - ``restricted, ramp``: the section 5 family at its starting point, ``u_B`` linear in arc length from 0
@@ -287,7 +288,8 @@ def main():
         print(f"\nsensitivity, mu_ratio: {'variant':44} {'initial':>8} {'optimised':>9} {'seconds':>8}")
         t = time.perf_counter()
         mmc = midedge_map(V, F, cut_face=int(np.argmin(np.linalg.norm(V[F].mean(1)[:, :2], axis=1))))
-        print(f"{'':23}{'uncontrolled, cut face at the centre':44} {map_measures(V, F, mmc)['mu_ratio']:8.3g} "
+        ratio = map_measures(V, F, mmc)['mu_ratio']
+        print(f"{'':23}{'uncontrolled, cut face at the centre':44} {ratio:8.3g} "
               f"{'':>9} {time.perf_counter() - t:8.2f}")
         k = n // 2
         for name, start in (('left edge middle (-2,0)', k * n), ('bottom edge middle (0,-2)', k)):
@@ -299,7 +301,8 @@ def main():
     if args.figure:
         keys = [k for k in ('uncontrolled', 'smoothed', 'uniform') if k in figmaps]
         lo, hi = figure(args.figure, V, F, [figmaps[k] for k in keys])
-        print(f"\nfigure {args.figure} ({os.path.getsize(args.figure) // 1024} KB): panels {', '.join(keys)}; "
+        kb = os.path.getsize(args.figure) // 1024
+        print(f"\nfigure {args.figure} ({kb} KB): panels {', '.join(keys)}; "
               f"per-panel mu ranges " + ', '.join(f"{figmaps[k][2].min():.3g}..{figmaps[k][2].max():.3g}"
                                                   for k in keys)
               + f"; shared range {lo:.3g}..{hi:.3g}")

@@ -6,7 +6,7 @@ mesh.
 
 Meshes: an icosphere, spot and cheburashka (tests/data, read by ``v`` index), spot subdivided once
 and twice (flat midpoint split: the same surface), and star-shaped blobs with protrusions
-(``core.surfaces.blob``). Columns are min/max mu over the triangles (DESIGN.md section 3; over the
+(``core.surfaces.blob``). Columns are min/max mu over the triangles (docs/math.md §3; over the
 oriented ones when the map folds some) for the four
 Moebius modes, the gain of ``uniform`` over the better of centring and mean |log area|, and for the
 ``uniform`` map p1/p99, qc_mean, flips and seconds (map + Moebius; wall clock on a shared 2-core

@@ -1,4 +1,4 @@
-"""Metric reconstruction from travel times through the conformal plane (DESIGN.md section 6).
+"""Metric reconstruction from travel times through the conformal plane (docs/math.md §6).
 
 An unknown isotropic metric ``xi`` (a positive weight per point of the surface: a path's travel time
 is the integral of ``xi ds``) is recovered from measured travel times between source and sensor
@@ -45,7 +45,7 @@ from scipy.optimize import least_squares
 from .errors import ConformalError
 from .io.obj import text_lines
 
-SEED_RADIUS = 5.5        # source seed disk radius, in grid cells (DESIGN.md section 4, step 2);
+SEED_CELLS = 5.5        # source seed disk radius, in grid cells (docs/math.md §4, step 2);
                          # not an integer, so grid nodes rarely sit exactly on the seed circle
 DEFAULT_CELLS = 96       # grid cells along the longer side of the UV bounding box
 DEFAULT_CONTROL = 8      # B-spline control values along the longer side
@@ -241,9 +241,9 @@ def march(grid, w, src, solver='auto'):
     """Travel times (ny,nx) from the UV point ``src`` (2,) through the weight field ``w`` (ny,nx)
     (``|grad T| = w``; only valid nodes are used; +inf elsewhere).
 
-    Seed: within ``SEED_RADIUS + 2`` cells of the source the time is the straight-line chart time
+    Seed: within ``SEED_CELLS + 2`` cells of the source the time is the straight-line chart time
     ``|x - s| (w_s + 4 w_mid + w_x) / 6`` (Simpson's rule along the segment); the seed is the metric
-    disk ``T < tau = SEED_RADIUS h w_s``. ``solver`` 'skfmm' marches (order 2) from its rim, with the
+    disk ``T < tau = SEED_CELLS h w_s``. ``solver`` 'skfmm' marches (order 2) from its rim, with the
     level set calibrated by ``core.geodesic.calibrate_phi`` so that scikit-fmm starts the nodes next
     to the rim at their exact times (no point-source offset), and adds ``tau`` back; 'sweep' runs
     ``core.eikonal`` (pure numpy) from the fixed seed times; 'auto' picks scikit-fmm if it imports.
@@ -252,7 +252,7 @@ def march(grid, w, src, solver='auto'):
     solver = _solver(solver)
     x, y = grid.coords()
     h = grid.h
-    r = SEED_RADIUS * h
+    r = SEED_CELLS * h
     d = np.hypot(x[None, :] - src[0], y[:, None] - src[1])
     idx, wts = grid.bilinear(src[None])
     w_src = float(sample(w, idx, wts)[0])

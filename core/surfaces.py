@@ -1,4 +1,4 @@
-"""The test surfaces of DESIGN.md section 7: height fields z = f(x, y) on an n x n grid over [-2,2]^2."""
+"""The test surfaces of docs/math.md §7: height fields z = f(x, y) on an n x n grid over [-2,2]^2."""
 import numpy as np
 
 from .errors import ConformalError
@@ -10,7 +10,7 @@ SURFACES = {
     'ridge': lambda x, y: np.exp(-4 * (x - 1.2)**2) + np.exp(-4 * (y + 1.2)**2),
     'saddle': lambda x, y: 0.4 * (x**2 - y**2),
     'flat': lambda x, y: 0.0 * x,
-    # beyond DESIGN.md: checks of generality, on shapes the method was not tuned on
+    # beyond the paper's surfaces: checks of generality, on shapes the method was not tuned on
     'waves': lambda x, y: 0.3 * np.sin(2 * x) * np.cos(1.5 * y),
     'monkey': lambda x, y: 0.1 * (x**3 - 3 * x * y**2),
     'cliff': lambda x, y: 0.8 * np.tanh(3 * (x + y - 1.5)),
@@ -40,7 +40,7 @@ def make_surface(name, n):
     return V, grid_faces(n)
 
 
-# --- closed test shapes (sphere mode) --------------------------------------------------------------------------------------
+# --- closed test shapes (sphere mode) --------------------------------------------------------------
 def icosphere(freq=8):
     """Geodesic sphere: each icosahedron face split into ``freq**2`` triangles, projected to the unit
     sphere. Returns ``V`` (10 freq^2 + 2, 3) and ``F`` (20 freq^2, 3), counter-clockwise seen from

@@ -106,7 +106,7 @@ def test_operator_flags(addon):
 
 
 def test_undo_not_runnable_headless(addon):
-    # Documented limitation (DESIGN.md section 9): undo needs a GUI session, so it is not tested here.
+    # Documented limitation (docs/blender.md): undo needs a GUI session, so it is not tested here.
     assert bpy.app.background
     assert not bpy.ops.ed.undo.poll()
 

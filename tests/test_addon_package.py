@@ -69,7 +69,8 @@ def test_every_python_line_without_wheels(tmp_path):
                           log=lambda *a: None)
     got = {}
     for path, py, plat in built:
-        assert plat is None and os.path.basename(path) == f"conformal_flatten-{VERSION}-cp{py.replace('.', '')}.zip"
+        cp = py.replace('.', '')
+        assert plat is None and os.path.basename(path) == f"conformal_flatten-{VERSION}-cp{cp}.zip"
         with zipfile.ZipFile(path) as z:
             m = tomllib.loads(z.read('blender_manifest.toml').decode())
         assert 'wheels' not in m and 'platforms' not in m

@@ -1,4 +1,4 @@
-"""Disk flattening (DESIGN.md sections 2, 3, 8): thresholds, conformality, isometry, invariance."""
+"""Disk flattening (docs/math.md §2, §3): thresholds, conformality, isometry, invariance."""
 import os
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Discrete geometry and topology (DESIGN.md section 1)."""
+"""Discrete geometry and topology (docs/math.md §1)."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,4 @@
-"""Intrinsic mollification and intrinsic Delaunay flips (core/mesh/intrinsic.py, DESIGN.md section 11)."""
+"""Intrinsic mollification and intrinsic Delaunay flips (core/mesh/intrinsic.py, docs/math.md §8)."""
 import time
 
 import numpy as np

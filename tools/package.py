@@ -86,7 +86,8 @@ def blender_ext_paths():
 def run(cmd, **kw):
     proc = subprocess.run(cmd, capture_output=True, text=True, **kw)
     if proc.returncode != 0:
-        raise PackageError(f"{' '.join(map(str, cmd[:4]))} ... failed:\n{proc.stdout[-2000:]}{proc.stderr[-2000:]}")
+        raise PackageError(f"{' '.join(map(str, cmd[:4]))} ... failed:\n{proc.stdout[-2000:]}"
+                           f"{proc.stderr[-2000:]}")
     return proc.stdout
 
 
@@ -140,8 +141,9 @@ def fetch_wheels(wheel_dir, python='3.11', platforms=None, log=print):
     cp = 'cp' + python.replace('.', '')
     out = {}
     for plat in platforms or PLATFORMS:
-        def scipy_here():
-            return [w for w in have(wheel_dir, f'scipy-{scipy_v}-{cp}-*.whl') if _wheel_platform_matches(w, plat)]
+        def scipy_here(plat=plat):
+            return [w for w in have(wheel_dir, f'scipy-{scipy_v}-{cp}-*.whl')
+                    if _wheel_platform_matches(w, plat)]
         if not scipy_here():
             log(f"downloading scipy {scipy_v} for {plat}, Python {python}")
             _download(wheel_dir, f'scipy=={scipy_v}', python, PLATFORMS[plat])
@@ -164,7 +166,8 @@ def fetch_wheels(wheel_dir, python='3.11', platforms=None, log=print):
             _build_fmm_linux(wheel_dir, fmm_v, python, log)
             lin = have(wheel_dir, f'scikit_fmm-{fmm_v}-{cp}-*linux_x86_64.whl')
         if not lin:
-            raise PackageError(f"the scikit-fmm wheel for linux-x64, Python {python}, is missing after the build")
+            raise PackageError(f"the scikit-fmm wheel for linux-x64, Python {python}, is missing after "
+                               "the build")
         out['linux-x64'] += lin[:1]
     return out
 

@@ -223,7 +223,8 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
     auto_seams, cone_list = np.zeros((0, 2), np.int64), []
     if cones is not None:
         if not (cones == 'auto' or (isinstance(cones, (int, np.integer)) and cones >= 0)):
-            raise ConformalError(f"cones must be 'auto', a cone budget (an integer >= 0) or None, got {cones!r}")
+            raise ConformalError(f"cones must be 'auto', a cone budget (an integer >= 0) or None, got "
+                                 f"{cones!r}")
         if cones == 0:
             cones = 'auto'
     disk, loops = (False, None) if cones is not None else _plain_disk(Vs, Fs, Ss, max_faces)
@@ -309,7 +310,8 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         r['warnings'] = island_warnings(r, desc) + [f"{desc}: {w}" for w in r.get('warnings', [])
                                                      if cones is not None]
         warnings += r['warnings']
-    summary.update({'path': 'cones' if cones is not None else 'disk' if disk else 'islands', 'boundary': boundary, 'fit': fit,
+    path = 'cones' if cones is not None else 'disk' if disk else 'islands'
+    summary.update({'path': path, 'boundary': boundary, 'fit': fit,
                     'holes': holes, 'island_scale': island_scale, 'triangles': int(m),
                     'vertices': int(len(V)), 'selected_triangles': int(len(sel)),
                     'flattened_triangles': int(flattened.sum()), 'seams': int(len(Ss)),
@@ -415,7 +417,8 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
         res = _cone_part(V[used], Fp, cones, target_ratio, max_cones, sub)
         done += share
         r = dict(res.report)
-        r.update({'island': p + 1, 'triangles': int(len(tris)), 'area_3d': float(face_areas(V[used], Fp).sum())})
+        r.update({'island': p + 1, 'triangles': int(len(tris)),
+                  'area_3d': float(face_areas(V[used], Fp).sum())})
         islands.append(r)
         uv_corner[tris] = res.uv
         if len(res.seams):

@@ -51,7 +51,8 @@ def add_arguments(p):
                         'for the fewest cones reaching --target-ratio, or a cone budget N per part; '
                         'input seams are then ignored')
     p.add_argument('--target-ratio', type=float, default=0.5,
-                   help='with --cones auto: the 1%%/99%% ratio of the conformal factor to reach (default 0.5)')
+                   help='with --cones auto: the 1%%/99%% ratio of the conformal factor to reach '
+                        '(default 0.5)')
     p.add_argument('--max-cones', type=int, default=48, help='with --cones auto: at most this many cones per '
                    'part (default 48)')
     p.add_argument('--seams-out', metavar='SEAMS.txt', default=None,
@@ -149,7 +150,8 @@ def run(args):
         r['seams_file'] = seams_out
     if args.json:
         print(json.dumps({'summary': r, 'islands': res.islands, 'warnings': res.warnings,
-                          'cones': [{'vertex': v, 'kappa': k, 'angle': 2 * np.pi - k} for v, k in res.cones]}))
+                          'cones': [{'vertex': v, 'kappa': k, 'angle': 2 * np.pi - k}
+                                    for v, k in res.cones]}))
     else:
         print(f"{r['islands']} island(s), {r['flattened']} flattened ({args.boundary}), holes filled "
               f"{r['holes_filled']}, cut {r['holes_cut']}: flips {r['flips']}, overlaps {r['overlaps']}, "

@@ -346,7 +346,7 @@ def optimise_restricted(V, F, start=None, p_schedule=(8, 32, 128, 512), maxiter=
     nit = nfev = 0
     for p in p_schedule:
         scale = z.mean()
-        res = minimize(lambda y: fam.soft_objective(y * scale, p), z / scale, jac=True,
+        res = minimize(lambda y, scale=scale, p=p: fam.soft_objective(y * scale, p), z / scale, jac=True,
                        method='L-BFGS-B', bounds=[(0.0, None)] * fam.nb,
                        options=dict(maxiter=maxiter, maxcor=20, ftol=1e-12, gtol=1e-9))
         z = res.x * scale
@@ -442,7 +442,7 @@ def lp_restricted(V, F, start=None, rounds=6, family=None, z0=None, directions=8
 
 
 def map_measures(V, F, mm):
-    """DESIGN.md section 3 measures of a midedge map on its medial triangles (dict from
+    """docs/math.md §3 measures of a midedge map on its medial triangles (dict from
     ``core.measures.uv_measures``) plus ``area_ratio``: min over max of the per-triangle ratio image
     area / 3D area (``mu_ratio**2`` for an exact midedge map)."""
     Vm, Fm, UVm = mm.midedge_mesh(V, F)

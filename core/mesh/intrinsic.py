@@ -1,4 +1,4 @@
-"""Intrinsic Delaunay triangulation with intrinsic mollification (DESIGN.md section 11).
+"""Intrinsic Delaunay triangulation with intrinsic mollification (docs/math.md §8).
 
 The cotan Laplacian of a real mesh has negative weights wherever an edge is not Delaunay (the two angles
 opposite it sum to more than pi). Harmonic maps built on it then lose the maximum principle and can fold.
@@ -145,7 +145,8 @@ def _build_edges(F, n):
     key = lo * np.int64(n) + hi
     uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
     if np.any(cnt > 2):
-        raise ConformalError(f'{int(np.sum(cnt > 2))} non-manifold edges have more than two faces', 'bad_topology')
+        raise ConformalError(f'{int(np.sum(cnt > 2))} non-manifold edges have more than two faces',
+                             'bad_topology')
     if np.any(u == v):
         raise ConformalError('a face uses the same vertex twice', 'degenerate')
     E = len(uniq)

@@ -1,4 +1,4 @@
-"""The measures of DESIGN.md section 3, for a UV map or a map to the sphere."""
+"""The measures of docs/math.md §3, for a UV map or a map to the sphere."""
 import numpy as np
 
 
@@ -77,7 +77,7 @@ def summarise(mu, qc, A, orient):
 
 
 def measures_from_jacobians(J, A):
-    """DESIGN.md section 3 measures from per-triangle Jacobians ``J`` (m,2,2) and 3D areas ``A`` (m,):
+    """docs/math.md §3 measures from per-triangle Jacobians ``J`` (m,2,2) and 3D areas ``A`` (m,):
     (report dict, per-triangle ``mu`` (m,))."""
     s = singular_values(J)
     det = determinants(J)
@@ -89,7 +89,7 @@ def measures_from_jacobians(J, A):
 
 
 def uv_measures(V, F, UV):
-    """DESIGN.md section 3 measures of a UV map: dict with faces, flips, mu_ratio, mu_ratio_p1_p99,
+    """docs/math.md §3 measures of a UV map: dict with faces, flips, mu_ratio, mu_ratio_p1_p99,
     qc_mean (area-weighted) and qc_max. ``V`` (n,3), ``F`` (m,3), ``UV`` (n,2)."""
     return measures_from_jacobians(*jacobians(V, F, UV))[0]
 

@@ -3,8 +3,8 @@ corner and ``sizes`` (p,) corners per polygon, polygons stored one after another
 
 Triangles are kept; quads are split along a diagonal that neither folds them nor repeats an existing
 edge (a vertex shared by only two quads would otherwise give duplicate triangles); larger polygons
-are ear-clipped in their best-fit plane, so concave n-gons triangulate without overlaps. The result refers to corners, so per-corner data (UVs)
-can be written back to the polygons unchanged."""
+are ear-clipped in their best-fit plane, so concave n-gons triangulate without overlaps. The result
+refers to corners, so per-corner data (UVs) can be written back to the polygons unchanged."""
 import numpy as np
 
 

@@ -94,7 +94,8 @@ def _seed(chart, ws, radius):
 def _march(phi, chart, solver, T0=None, narrow=0.0):
     """Travel time (ny, nx) from the zero contour of ``phi`` in ``chart`` (inf where not reached).
     With scikit-fmm the march stops ``narrow`` beyond the contour (0: no limit); otherwise
-    ``core.geodesic.solver.eikonal_march`` runs (the numpy sweep holds ``T0``'s finite nodes fixed and returns full
+    ``core.geodesic.solver.eikonal_march`` runs (the numpy sweep holds ``T0``'s finite nodes fixed and
+    returns full
     times). Returns (T, solver used)."""
     from ..geodesic.solver import eikonal_march as march
     mask = ~chart.valid
@@ -127,7 +128,8 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     V (n,3), F (m,3); ``sources`` vertex indices (k,) (the result is the distance to the nearest).
     ``S`` (n,3): a sphere map to reuse (from ``sphere_map``); None computes one with ``moebius``.
     ``grid``: nodes per side of each chart (None: ``default_sphere_grid``). ``solver``: as
-    ``core.geodesic.solver.eikonal_march`` ('auto', 'skfmm', 'sweep'). ``overlap``: half-width of the band the two
+    ``core.geodesic.solver.eikonal_march`` ('auto', 'skfmm', 'sweep'). ``overlap``: half-width of the
+    band the two
     charts share, in degrees of latitude. ``source_radius``: exact seed disk radius, in cells.
     Returns ``(dist (n,) float64 in mesh units, report dict)``."""
     from ..geodesic.solver import calibrate_phi

@@ -57,7 +57,7 @@ optimal path segment within a bucket lies in one chart, and the charts exchange 
 the overlap after each bucket. On an icosphere the mean relative error against great circles is about
 0.05% at the default grid.
 
-Measures (as ``tools/measure.py sphere``): per triangle, ``mu = sqrt(area of the flat triangle of the
+Measures: per triangle, ``mu = sqrt(area of the flat triangle of the
 mapped vertices / 3D area)``, normalised so that the totals agree; ``qc`` from the 2x2 Jacobian between
 the triangle's plane and the mapped triangle's plane; a flip is a mapped normal pointing inwards.
 """
@@ -321,7 +321,7 @@ def harmonic_flow(S: np.ndarray, F: np.ndarray, L: sp.spmatrix, steps: int | Non
 
 
 def sphere_measures(V, F, S, per_face=False):
-    """DESIGN.md section 3 measures of a map to the sphere (as ``tools/measure.py sphere``): dict with
+    """docs/math.md §3 measures of a map to the sphere : dict with
     faces, flips, mu_ratio, mu_ratio_p1_p99, qc_mean, qc_max. ``S`` (n,3) is normalised first. With
     ``per_face``, also returns ``(mu (m,), qc (m,), flipped (m,) bool)``."""
     V = np.asarray(V, np.float64)

@@ -1,4 +1,4 @@
-"""Moebius transformations of the unit sphere, and the choice of one for sphere mode (DESIGN.md section 5).
+"""Moebius transformations of the unit sphere, and the choice of one for sphere mode (docs/math.md §5).
 
 Parametrisation
 ---------------
