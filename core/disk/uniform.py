@@ -2,8 +2,8 @@
 
 The paper's objective is to maximise ``min mu / max mu``. In the log scale ``u`` this is: minimise
 ``max(u) - min(u)`` over the boundary values ``u_B``, with the interior given by the Yamabe equation
-``L_II u_I = -Omega_I - L_IB u_B`` (DESIGN.md section 2, written there for ``-u``). Because ``u = u0 + harmonic(u_B)`` is affine in
-``u_B``, the vertex-level problem is a linear program; ``vertex_bound`` solves it exactly (active set
+``L_II u_I = -Omega_I - L_IB u_B`` (docs/math.md §2). Because ``u = u0 + harmonic(u_B)`` is affine
+in ``u_B``, the vertex-level problem is a linear program; ``vertex_bound`` solves it exactly (active set
 over the interior vertices) and reports the certified optimum.
 
 The realised per-triangle ratio of the final map is what matters, and a raw LP optimum is jagged along
@@ -122,15 +122,15 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
              bins=64, progress=None, real_faces=None):
     """Maximise the realised ``min mu / max mu`` over smooth boundary scale factors.
 
-    system: ``DiskSystem``. n_freq: Fourier modes of u_B (default grows with the boundary length, at
-    most 16). max_iter: outer steps (each builds at most three maps); max_maps: maps built in all.
-    qc_slack: allowed rise of the area-weighted mean quasi-conformal distortion over the ``area`` map
-    (default: half its excess over 1, at least 0.002). active: faces per side the LP starts from. reg: weight of the step-length
-    term (per unit of |coefficient| times frequency, relative to the spread). real_faces: optional
-    (m,) bool; only these triangles count in the objective and the conformality budget. bins: the
-    LP sees, in each cell of a bins x bins grid over the current UV map, only the highest and the
-    lowest triangle (the response rows are smooth, so neighbours are near-duplicates); the realised
-    map is always measured on every triangle.
+    system: ``DiskSystem``. n_freq: Fourier modes of u_B (default grows with the boundary length, at most
+    16). max_iter: outer steps (each builds at most three maps); max_maps: maps built in all. qc_slack:
+    allowed rise of the area-weighted mean quasi-conformal distortion over the ``area`` map (default: half
+    its excess over 1, at least 0.002). active: faces per side the LP starts from. reg: weight of the
+    step-length term (per unit of |coefficient| times frequency, relative to the spread). real_faces:
+    optional (m,) bool; only these triangles count in the objective and the conformality budget. bins: the
+    LP sees, in each cell of a bins x bins grid over the current UV map, only the highest and the lowest
+    triangle (the response rows are smooth, so neighbours are near-duplicates); the realised map is always
+    measured on every triangle.
     Returns ``u`` (n,), ``uv`` (n,2) and a dict for the report."""
     progress = progress or (lambda f, msg: None)
     nb = len(system.B)
@@ -209,7 +209,7 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
 
 def vertex_bound(system, tol=1e-9, batch=64, max_rounds=50, real_faces=None):
     """Certified vertex-level optimum: the ratio ``exp(-(max u - min u))`` at the best ``u_B`` over all
-    boundary values (the linear program of DESIGN.md section 2). Active set over interior vertices:
+    boundary values (the linear program of docs/math.md §2). Active set over interior vertices:
     rows of ``-L_II^-1 L_IB`` are added for the vertices that violate the current bounds.
     real_faces: optional (m,) bool; only vertices of these triangles are constrained."""
     nb, nI = len(system.B), len(system.I)
