@@ -31,7 +31,7 @@ import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from ..core.errors import ConformalError
-from ..core.geodesic.solver import GeodesicSolver
+from ..core.geodesic.solver import GeodesicSolver, nearest_vertex
 from . import meshio
 from .colormap import colormap
 from .apply import REPORT_KEY as FLATTEN_REPORT_KEY
@@ -73,9 +73,7 @@ def active_vertex(obj):
 def nearest_to_cursor(context, obj, V, used):
     """Index of the vertex (among ``used``, (n,) bool) nearest the 3D cursor, in object space."""
     loc = obj.matrix_world.inverted() @ context.scene.cursor.location
-    d = np.linalg.norm(V - np.array(loc[:]), axis=1)
-    d[~used] = np.inf
-    return int(np.argmin(d))
+    return nearest_vertex(V, loc[:], used)
 
 
 def pick_sources(context, obj, md, how, was_edit, active):

@@ -1044,3 +1044,12 @@ def geodesic_distance(V: np.ndarray, F: np.ndarray, sources=None, points=None, u
                         seams=seams, error_target=error_target, progress=lambda f, m: say(0.4 * f, m))
     return gs.distance(sources, points, source_radius=source_radius, calibrate=calibrate, clamp=clamp,
                        progress=lambda f, m: say(0.4 + 0.6 * f, m))
+
+
+def nearest_vertex(V: np.ndarray, point, used: np.ndarray | None = None) -> int:
+    """Index of the vertex of ``V`` (n,3) nearest ``point`` (3,) (e.g. the 3D cursor in object space),
+    among ``used`` ((n,) bool, e.g. vertices of some face; default all)."""
+    d = np.linalg.norm(np.asarray(V, np.float64) - np.asarray(point, np.float64), axis=1)
+    if used is not None:
+        d[~np.asarray(used, bool)] = np.inf
+    return int(np.argmin(d))
