@@ -48,7 +48,7 @@ def mesh_file(cache, n):
 
 
 def run_process(argv, env):
-    """Run ``argv``; return (wall seconds, peak RSS MB, stdout). Raises on a non-zero exit."""
+    """Run ``argv``; return (wall seconds, peak RSS MB, stdout, CPU seconds). Raises on a non-zero exit."""
     t = time.perf_counter()
     with tempfile.TemporaryFile() as errf:
         p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=errf, env=env)
@@ -59,13 +59,21 @@ def run_process(argv, env):
         if code:
             errf.seek(0)
             raise RuntimeError(f"{' '.join(argv)} exited {code}: {errf.read().decode()[-400:]}")
-    return wall, usage.ru_maxrss / 1024, out.decode()
+    return wall, usage.ru_maxrss / 1024, out.decode(), usage.ru_utime + usage.ru_stime
 
 
 def startup_seconds(env):
     """Wall time of a process that only starts Python and imports what the flatten command uses."""
     code = 'import core.cli.flatten'
     return min(run_process([sys.executable, '-c', code], env)[0] for _ in range(3))
+
+
+def load_note():
+    """The 1-minute load average against the core count: timings are only comparable on an idle machine."""
+    try:
+        return f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
+    except OSError:
+        return ''
 
 
 def main():
@@ -86,10 +94,10 @@ def main():
     print("BFF anchors (issue 16, BFF binary not available here): "
           + ', '.join(f"n={n} {s} s" for n, s in BFF_SECONDS.items()) + ", 1.33 GB peak at 1M")
     env0 = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get('PYTHONPATH', ''))
-    print(f"interpreter start + imports: {startup_seconds(env0):.2f} s")
-    print("| triangles | mode | solver | wall s | core total s | factor s | solve s | I/O+start s "
+    print(f"interpreter start + imports: {startup_seconds(env0):.2f} s; {load_note()}")
+    print("| triangles | mode | solver | wall s | CPU s | core total s | factor s | solve s | I/O+start s "
           "| peak MB | vs BFF time | vs BFF mem | mu_ratio | qc_mean | flips |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for size in sizes:
         n = grid_n(size)
         path = mesh_file(args.cache, n)
@@ -103,17 +111,17 @@ def main():
                 runs = []
                 try:
                     for _ in range(args.repeat):
-                        wall, peak, out = run_process(argv, env)
-                        runs.append((wall, peak, json.loads(out.strip().splitlines()[-1])))
+                        wall, peak, out, cpu = run_process(argv, env)
+                        runs.append((wall, peak, json.loads(out.strip().splitlines()[-1]), cpu))
                 except RuntimeError as exc:
                     print(f"| {2 * (n - 1) ** 2:,} | {mode} | {solver} | failed: {exc} |")
                     continue
                 runs.sort(key=lambda r: r[0])
-                wall, peak, rep = runs[len(runs) // 2]
+                wall, peak, rep, cpu = runs[len(runs) // 2]
                 sec = rep['seconds']
                 bff = BFF_SECONDS.get(n)
                 bff_m = BFF_PEAK_MB.get(n)
-                print(f"| {rep['faces']:,} | {mode} | {rep.get('solver', solver)} | {wall:.2f} | "
+                print(f"| {rep['faces']:,} | {mode} | {rep.get('solver', solver)} | {wall:.2f} | {cpu:.2f} | "
                       f"{sec['total']:.2f} | {sec['factor']:.2f} | {sec['solve']:.2f} | "
                       f"{wall - sec['total']:.2f} | {statistics.median(r[1] for r in runs):.0f} | "
                       f"{f'{wall / bff:.2f}x' if bff else ''} | {f'{peak / bff_m:.2f}x' if bff_m else ''} | "
