@@ -9,7 +9,8 @@ Each case is one child process, timed from spawn to exit (interpreter start, imp
 flatten, OBJ write), with its own peak resident set size from ``os.wait4``; ``--repeat`` takes the
 median. The report's own timings (``--json``) split the core's part: factor, solve, total. The
 input OBJ files are written once into ``--cache`` (default: a folder under the system temp dir).
-``--solvers`` runs each case with ``CONFORMAL_SOLVER`` set (``superlu`` forces the fallback).
+``--solvers`` runs each case with ``CONFORMAL_SOLVER`` set (``auto``: the core chooses by size; ``superlu``
+or ``cholmod`` force one backend).
 The anchors printed with the table are the BFF command-line tool's figures measured on this machine
 for issue 16 (BFF's binary is not shipped here): wall time 0.35 s at 33k, 1.78 s at 100k, 8.5 s at
 403k, 18.9 s at 1M; peak memory 1.33 GB at 1M.
@@ -81,7 +82,8 @@ def main():
     ap.add_argument('--sizes', type=int, nargs='+', default=SIZES, help='target triangle counts')
     ap.add_argument('--with-4m', action='store_true', help='add the 4M-triangle case (needs ~6 GB)')
     ap.add_argument('--modes', nargs='+', default=['area', 'uniform'], choices=['free', 'area', 'uniform'])
-    ap.add_argument('--solvers', nargs='+', default=['cholmod', 'superlu'], choices=['cholmod', 'superlu'])
+    ap.add_argument('--solvers', nargs='+', default=['auto'], choices=['auto', 'cholmod', 'superlu'],
+                    help='auto: the core\'s own choice by size; the others force one backend')
     ap.add_argument('--uniform-max', type=int, default=1_000_000,
                     help='run uniform only up to this many triangles')
     ap.add_argument('--repeat', type=int, default=1, help='runs per case (median reported)')

@@ -45,15 +45,20 @@ def maze(slots=6, rows=24, corridor=3, bend=0.0):
     return V[used], remap[F]
 
 
-def test_backend_is_named_and_cholmod_when_installed():
+def test_backend_by_size_and_cholmod_when_installed(monkeypatch):
     pytest.importorskip('cholespy')        # requirements.txt pins it; a platform without a wheel falls back
-    assert solve.backend() == 'cholmod'
+    monkeypatch.delenv('CONFORMAL_SOLVER', raising=False)
+    assert solve.backend() == 'cholmod' and solve.backend(solve.CHOLMOD_MIN) == 'cholmod'
+    assert solve.backend(1000) == 'superlu'
+    assert solve.Factor(_interior_laplacian()).backend == 'superlu'
+    assert solve.Factor(_interior_laplacian(), method='cholmod').backend == 'cholmod'
+    monkeypatch.setenv('CONFORMAL_SOLVER', 'cholmod')
     assert solve.Factor(_interior_laplacian()).backend == 'cholmod'
 
 
 def test_forced_superlu(monkeypatch):
     monkeypatch.setenv('CONFORMAL_SOLVER', 'superlu')
-    assert solve.backend() == 'superlu'
+    assert solve.backend() == 'superlu' and solve.backend(10**7) == 'superlu'
     assert solve.Factor(_interior_laplacian()).backend == 'superlu'
 
 
@@ -86,19 +91,19 @@ def test_indefinite_falls_back_to_superlu_and_singular_raises():
     # symmetric, nonsingular, indefinite: CHOLMOD refuses it, LU solves it (a cotan Laplacian of a
     # mesh with very obtuse triangles can be like this)
     K = sp.csc_matrix(np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.5], [0.0, 0.5, 3.0]]))
-    f = solve.Factor(K)
+    f = solve.Factor(K, method='cholmod')
     assert f.backend == 'superlu'
     b = np.array([1.0, -2.0, 0.5])
     assert np.allclose(K @ f.solve(b), b)
     with pytest.raises(ConformalError) as exc:
-        solve.Factor(sp.csc_matrix(np.ones((3, 3))))
+        solve.Factor(sp.csc_matrix(np.ones((3, 3))), method='cholmod')
     assert exc.value.code == 'degenerate'
 
 
 def test_non_symmetric_goes_to_superlu():
     K = _interior_laplacian().tolil()
     K[0, 1] += 1e-3
-    f = solve.Factor(K.tocsc())
+    f = solve.Factor(K.tocsc(), method='cholmod')
     assert f.backend == 'superlu'
     b = np.ones(K.shape[0])
     assert np.abs(K.tocsc() @ f.solve(b) - b).max() < 1e-9
@@ -106,6 +111,7 @@ def test_non_symmetric_goes_to_superlu():
 
 def test_flatten_same_map_on_both_backends(monkeypatch):
     V, F = make_surface('edgebump', 33)
+    monkeypatch.setenv('CONFORMAL_SOLVER', 'cholmod')
     a = flatten(V, F, boundary='area')
     monkeypatch.setenv('CONFORMAL_SOLVER', 'superlu')
     b = flatten(V, F, boundary='area')

@@ -3,15 +3,19 @@
 Two backends (docs/scale.md):
 
 - ``cholmod``: a sparse Cholesky factorisation ``K = L L^T`` by CHOLMOD (nested dissection ordering)
-  through the small ``cholespy`` binding, when its wheel is installed. About twice as fast as
-  SuperLU to factor a mesh Laplacian and scales as a 2D nested dissection should (no slow corner
-  at millions of triangles).
-- ``superlu``: scipy's SuperLU in symmetric mode, always available; used where cholespy is missing,
-  for a matrix that is not numerically symmetric, and for one that CHOLMOD finds not positive
-  definite (a Laplacian of a mesh with very obtuse triangles can be indefinite yet nonsingular).
+  through the small ``cholespy`` binding, when its wheel is installed. Used for matrices of at
+  least ``CHOLMOD_MIN`` rows (about 600k triangles): it scales as a 2D nested dissection should
+  (measured 2.6x the factor time from 1M to 2M triangles, SuperLU 5.3x) in a third of SuperLU's
+  factor memory.
+- ``superlu``: scipy's SuperLU in symmetric mode, always available. Used below ``CHOLMOD_MIN``
+  (measured faster there, and it releases the GIL, so two factorisations run on two cores), where
+  cholespy is missing, for a matrix that is not numerically symmetric, and for one that CHOLMOD
+  finds not positive definite (a Laplacian of a mesh with very obtuse triangles can be indefinite
+  yet nonsingular).
 
-``backend()`` names the backend new factorisations will use; ``Factor.backend`` the one that ran.
-The environment variable ``CONFORMAL_SOLVER=superlu`` forces the fallback (for comparisons).
+``backend(size)`` names the backend a new factorisation of a ``size`` x ``size`` matrix uses;
+``Factor.backend`` the one that ran. ``CONFORMAL_SOLVER=superlu`` or ``=cholmod`` in the environment
+forces one for all sizes (for comparisons).
 """
 import os
 from concurrent.futures import ThreadPoolExecutor
@@ -30,21 +34,25 @@ except ImportError:                      # pragma: no cover - depends on the pla
 WORKERS = min(2, os.cpu_count() or 1)
 BACKENDS = ('cholmod', 'superlu')
 SPLIT_RHS = 8           # SuperLU: split at least this many right-hand sides over WORKERS threads
+CHOLMOD_MIN = 300_000   # rows from which CHOLMOD is used (a disk of ~600k triangles; docs/scale.md)
 _SYM_TOL = 1e-12        # relative asymmetry above which a matrix goes to SuperLU
 
 
-def backend():
-    """Name of the backend new ``Factor``s use: 'cholmod' (cholespy installed) or 'superlu'."""
+def backend(size=None):
+    """Name of the backend a new ``Factor`` of a ``size`` x ``size`` matrix uses: 'cholmod' or
+    'superlu'. Without ``size``: 'cholmod' if cholespy is installed (and not forced off)."""
     forced = os.environ.get('CONFORMAL_SOLVER', '').strip().lower()
-    if forced == 'superlu' or _cholespy is None:
+    if _cholespy is None or forced == 'superlu':
         return 'superlu'
-    return 'cholmod'
+    if forced == 'cholmod' or size is None or size >= CHOLMOD_MIN:
+        return 'cholmod'
+    return 'superlu'
 
 
 def factor_all(*matrices):
     """``Factor`` of each matrix. SuperLU releases the GIL, so its factorisations run on two
     threads; CHOLMOD's binding holds it (two threads measured no faster), so they run in turn."""
-    if WORKERS < 2 or len(matrices) < 2 or backend() == 'cholmod':
+    if WORKERS < 2 or len(matrices) < 2 or any(backend(K.shape[0]) == 'cholmod' for K in matrices):
         return [Factor(K) for K in matrices]
     with ThreadPoolExecutor(min(WORKERS, len(matrices))) as ex:
         return list(ex.map(Factor, matrices))
@@ -96,13 +104,14 @@ class Factor:
     """Factorisation of a sparse symmetric positive definite matrix ``K`` (k,k), computed once.
 
     ``solve(b)`` takes (k,) or (k,r) right-hand sides and returns float64 of the same shape.
-    ``backend`` is the backend that ran ('cholmod' or 'superlu'); ``method`` (optional) forces one.
+    ``backend`` is the backend that ran ('cholmod' or 'superlu'); ``method`` (optional) forces one,
+    otherwise ``backend(k)`` chooses.
     Raises ``ConformalError`` ('degenerate') if ``K`` is singular."""
 
     def __init__(self, K, method=None):
         K = sp.csc_matrix(K, dtype=np.float64)
         self.shape = K.shape
-        method = method or backend()
+        method = method or backend(K.shape[0])
         if method not in BACKENDS:
             raise ConformalError(f"unknown solver backend {method!r}: use one of {', '.join(BACKENDS)}")
         if method == 'cholmod' and _cholespy is None:
