@@ -3,6 +3,13 @@ against Blender's ``bpy.ops.uv.unwrap(method='CONFORMAL')`` on the same mesh in 
 with the core's peak memory (measured in a child process), then scaling up to about 1M triangles.
 
     .venv/bin/python bench/speed.py [--sizes 225 400 708] [--surface bump] [--no-blender]
+    .venv/bin/python bench/speed.py --latency [--small-n 65 129]     # issue 16: everyday meshes
+
+``--latency`` (issue 16): on the five test surfaces at n = 65 and 129 (8k and 33k triangles) and on a
+flat maze (a grid with slots cut in, ~9.5k triangles, ~3.2k boundary vertices), the core's own time
+(``report['seconds']['total']``) of ``area`` and of ``uniform`` with the certified bound, against
+Blender's CONFORMAL unwrap in this process; then whether splitting 32 right-hand sides over two
+threads helps the solver backend in use.
 """
 import argparse
 import json
@@ -43,6 +50,70 @@ def run_core(surface, n, mode):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def maze(slots=25, rows=60, corridor=3):
+    """A flat serpentine disk: unit grid cells, ``slots`` one-cell slots cut alternately from the
+    bottom and the top edge with ``corridor`` cells between them. Returns V (n,3), F (m,3)."""
+    import numpy as np
+    nx = slots * (corridor + 1) + corridor
+    keep = np.ones((nx, rows), bool)
+    for k in range(slots):
+        c = corridor + k * (corridor + 1)
+        keep[c, :rows - corridor] = k % 2 == 1
+        keep[c, corridor:] &= k % 2 == 0
+    i, j = np.nonzero(keep)
+    q = np.stack([i * (rows + 1) + j, (i + 1) * (rows + 1) + j, (i + 1) * (rows + 1) + j + 1,
+                  i * (rows + 1) + j + 1], 1)
+    F = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+    X, Y = np.meshgrid(np.arange(nx + 1.0), np.arange(rows + 1.0), indexing='ij')
+    V = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], 1)
+    used = np.unique(F)
+    remap = np.full(len(V), -1)
+    remap[used] = np.arange(len(used))
+    return V[used], remap[F]
+
+
+def latency(sizes, blender=True):
+    """Issue 16 table: core time of area and uniform (bound included) against Blender CONFORMAL."""
+    import time
+    import numpy as np
+    from core import flatten, make_surface
+    from core.mesh import solve
+    from blender_unwrap import blender_unwrap
+    print(f"solver backend: {solve.backend()}; load average {os.getloadavg()[0]:.1f} "
+          f"on {os.cpu_count()} cores")
+    print(f"{'mesh':14} {'faces':>6} {'blender s':>9} {'area s':>7} {'uniform s':>9} {'bound s':>7} "
+          f"{'uni/blender':>11} {'uni/area':>8} {'mu area':>8} {'mu uni':>8} {'bound':>8}")
+    cases = [(name, n) for n in sizes for name in ('bump', 'bump3', 'edgebump', 'ridge', 'saddle')]
+    cases.append(('maze', 0))
+    for name, n in cases:
+        V, F = maze() if name == 'maze' else make_surface(name, n)
+        base = blender_unwrap(V, F, 'CONFORMAL')[1] if blender else float('nan')
+        flatten(V, F, boundary='area')                                    # warm the imports
+        a = flatten(V, F, boundary='area').report
+        u = flatten(V, F, boundary='uniform', bound=True).report
+        ua, uu = a['seconds']['total'], u['seconds']['total']
+        print(f"{name + (f' {n}' if n else ''):14} {len(F):6d} {base:9.3f} {ua:7.3f} {uu:9.3f} "
+              f"{u['seconds'].get('bound', 0):7.3f} {uu / base:11.2f} {uu / ua:8.2f} {a['mu_ratio']:8.4f} "
+              f"{u['mu_ratio']:8.4f} {u.get('bound_vertex') or float('nan'):8.4f}", flush=True)
+    # threads: does splitting many right-hand sides over two threads help the backend in use?
+    V, F = make_surface('bump', 450)
+    from core.disk.flatten import DiskSystem
+    from core.mesh.validate import check_mesh
+    system = DiskSystem(V, F, check_mesh(V, F, kind='disk', max_faces=None).boundary)
+    f = system._II
+    B = np.random.default_rng(0).standard_normal((system.L_II.shape[0], 32))
+    from concurrent.futures import ThreadPoolExecutor
+    t = time.perf_counter()
+    f.solve(B)
+    one = time.perf_counter() - t
+    t = time.perf_counter()
+    with ThreadPoolExecutor(2) as ex:
+        list(ex.map(f.solve, [np.ascontiguousarray(B[:, :16]), np.ascontiguousarray(B[:, 16:])]))
+    two = time.perf_counter() - t
+    print(f"32 right-hand sides at 403k triangles ({f.backend}): one call {one:.2f} s, split over two "
+          f"threads {two:.2f} s")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--surface', default='bump')
@@ -50,7 +121,12 @@ def main():
     ap.add_argument('--no-blender', action='store_true')
     ap.add_argument('--blender-max-n', type=int, default=225,
                     help='run Blender\'s unwrap only up to this grid size (it is slow)')
+    ap.add_argument('--latency', action='store_true', help='issue 16 everyday-mesh table (see above)')
+    ap.add_argument('--small-n', type=int, nargs='*', default=[65, 129])
     args = ap.parse_args()
+    if args.latency:
+        latency(args.small_n, blender=not args.no_blender)
+        return
     print(f"{'n':>5} {'faces':>9} {'mode':8} {'seconds':>8} {'peak MB':>8} {'mu_ratio':>8} "
           f"{'qc_mean':>8} {'flips':>5} {'vs Blender CONFORMAL':>21}")
     for n in args.sizes:

@@ -149,7 +149,7 @@ def fetch_wheels(wheel_dir, python='3.11', platforms=None, log=print):
             _download(wheel_dir, f'scipy=={scipy_v}', python, PLATFORMS[plat])
         if not scipy_here():
             raise PackageError(f"no scipy {scipy_v} wheel for {plat}, Python {python}")
-        out[plat] = [scipy_here()[0]]
+        out[plat] = [scipy_here()[0]] + _cholespy(wheel_dir, python, plat, log)
     # scikit-fmm: Windows wheel from PyPI (cp311 only), Linux wheel built from the sdist, none for macOS.
     if 'windows-x64' in out:
         win = have(wheel_dir, f'scikit_fmm-{fmm_v}-{cp}-*win_amd64.whl')
@@ -170,6 +170,32 @@ def fetch_wheels(wheel_dir, python='3.11', platforms=None, log=print):
                                "the build")
         out['linux-x64'] += lin[:1]
     return out
+
+
+CHOLESPY_TAGS = {   # cholespy's wheels need newer platform tags than scipy's
+    'linux-x64': ['manylinux_2_28_x86_64', 'manylinux_2_27_x86_64'],
+    'windows-x64': ['win_amd64'],
+    'macos-arm64': ['macosx_11_0_arm64', 'macosx_12_0_arm64'],
+    'macos-x64': ['macosx_10_14_x86_64'],
+}
+
+
+def _cholespy(wheel_dir, python, plat, log):
+    """The cholespy wheel (CHOLMOD, core.mesh.solve) for ``plat`` and ``python``: cp311, or the
+    cp312-abi3 wheel for 3.13. Returns [path], or [] with a note when PyPI has none (the core then
+    uses SuperLU for every size)."""
+    v = pinned('cholespy')
+    tag = 'cp311-cp311' if python == '3.11' else 'cp312-abi3'
+
+    def here():
+        return [w for w in have(wheel_dir, f'cholespy-{v}-{tag}-*.whl') if _wheel_platform_matches(w, plat)]
+    if not here():
+        log(f"downloading cholespy {v} for {plat}, Python {python}")
+        try:
+            _download(wheel_dir, f'cholespy=={v}', python, CHOLESPY_TAGS[plat])
+        except PackageError as exc:
+            log(f"  no cholespy wheel for {plat}, Python {python}: SuperLU will be used ({exc})")
+    return here()[:1]
 
 
 def _wheel_platform_matches(path, plat):

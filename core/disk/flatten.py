@@ -302,7 +302,8 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     timings['factor'] = time.perf_counter() - t
     report_progress(0.25, 'solving')
     report = {'boundary': boundary, 'vertices': len(V), 'faces': len(F),
-              'boundary_vertices': int(len(info.boundary)), 'operators': system.operators}
+              'boundary_vertices': int(len(info.boundary)), 'operators': system.operators,
+              'solver': system._II.backend if system._II is not None else None}
     if degenerate.any():
         report['degenerate_faces'] = int(degenerate.sum())
     u = None

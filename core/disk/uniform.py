@@ -119,7 +119,7 @@ def _representatives(system, uv, s, keep, bins):
 
 
 def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active=200, reg=1e-3,
-             bins=64, progress=None, real_faces=None):
+             bins=64, progress=None, real_faces=None, min_gain=1e-3):
     """Maximise the realised ``min mu / max mu`` over smooth boundary scale factors.
 
     system: ``DiskSystem``. n_freq: Fourier modes of u_B (default grows with the boundary length, at most
@@ -130,7 +130,9 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     optional (m,) bool; only these triangles count in the objective and the conformality budget. bins: the
     LP sees, in each cell of a bins x bins grid over the current UV map, only the highest and the lowest
     triangle (the response rows are smooth, so neighbours are near-duplicates); the realised map is always
-    measured on every triangle.
+    measured on every triangle. min_gain: if the ``area`` map's realised ratio is already at least ``1 -
+    min_gain`` (a flat or nearly flat mesh), no ratio can beat it by more than ``min_gain`` (the ratio is
+    at most 1): the ``area`` map is returned at once, with ``area_certified`` in the dict (docs/scale.md).
     Returns ``u`` (n,), ``uv`` (n,2) and a dict for the report."""
     progress = progress or (lambda f, msg: None)
     nb = len(system.B)
@@ -153,6 +155,11 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     if qc_slack is None:
         qc_slack = max(0.5 * (qc0 - 1.0), 0.002)
     qc_budget = qc0 + qc_slack
+    spread0 = float(s0.max() - s0.min())
+    if spread0 <= -np.log1p(-min_gain):
+        return u0, uv0, {'ratio_area_mode': float(np.exp(-spread0)), 'iterations': 0, 'maps_built': 0,
+                         'basis_size': int(Phi.shape[1]), 'qc_budget': round(qc_budget, 5),
+                         'area_certified': f"the area map's ratio is within {min_gain:g} of 1"}
     progress(0.15, 'boundary response')
     H = system.harmonic(Phi)                          # (n, K): response of u to the coefficients
     Fk = system.F[keep]
@@ -207,21 +214,37 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     return best['u'], best['uv'], opt
 
 
-def vertex_bound(system, tol=1e-9, batch=64, max_rounds=50, real_faces=None):
+def vertex_bound(system, tol=1e-9, batch=64, max_rounds=50, real_faces=None, flat=1e-12, near_flat=1e-3):
     """Certified vertex-level optimum: the ratio ``exp(-(max u - min u))`` at the best ``u_B`` over all
     boundary values (the linear program of docs/math.md §2). Active set over interior vertices:
     rows of ``-L_II^-1 L_IB`` are added for the vertices that violate the current bounds.
-    real_faces: optional (m,) bool; only vertices of these triangles are constrained."""
+    real_faces: optional (m,) bool; only vertices of these triangles are constrained.
+
+    The optimum spread lies in [0, s], with ``s`` the spread of the ``area`` map's ``u`` (u_B = 0 is
+    feasible): if ``s <= flat`` (a flat mesh) the ratio ``exp(-s)`` is returned at once, certified
+    to ``flat``. If ``s < near_flat`` the program is ill-conditioned (measured: minutes, then
+    HiGHS fails on a bent maze) and ConformalError('solve_failed') says at once that the optimum
+    lies in [exp(-s), 1]. If ``s < 0.01`` the program is solved for ``u / s`` and scaled back (``u`` is linear
+    in ``Omega``), so a nearly flat mesh is solved to the same relative accuracy as a curved one."""
     nb, nI = len(system.B), len(system.I)
     u0 = system.yamabe(np.zeros(nb))
     if nI == 0:
         return 1.0
-    uI = u0[system.I]
     counted = np.ones(nI, bool)
     if real_faces is not None:
         used = np.zeros(system.n, bool)
         used[system.F[np.asarray(real_faces, bool)]] = True
         counted = used[system.I]
+    uI = u0[system.I]
+    scale = max(float(uI[counted].max(initial=0.0)) - float(uI[counted].min(initial=0.0)), 0.0)
+    if scale <= flat:
+        return float(np.exp(-scale))
+    if scale < near_flat:
+        raise ConformalError(f"the mesh is nearly flat: the bound lies between {np.exp(-scale):.6f} (the "
+                             "area map's vertex ratio) and 1; its linear program is not solved",
+                             'solve_failed')
+    scale = min(scale, 1e-2)            # rescale only nearly flat meshes: curved ones solve as they are
+    uI = uI / scale
     order = np.argsort(uI)
     order = order[counted[order]]
     R = np.unique(np.r_[order[:batch], order[-batch:]])
@@ -242,17 +265,22 @@ def vertex_bound(system, tol=1e-9, batch=64, max_rounds=50, real_faces=None):
         cost = np.r_[np.zeros(nb), 1.0, -1.0]
         res = linprog(cost, A_ub=A_ub, b_ub=b_ub, bounds=[(None, None)] * (nb + 2), method='highs')
         if res.status != 0:
-            raise ConformalError(f"the bound's linear program failed: {res.message}")
+            raise ConformalError(f"the bound's linear program failed: {res.message}", 'solve_failed')
         uB, t1, t0 = res.x[:nb], res.x[nb], res.x[nb + 1]
-        u = system.yamabe(uB)[system.I]
+        u = u0[system.I] / scale + _harmonic_interior(system, uB)
         viol = np.where(counted, np.maximum(u - t1, t0 - u), -np.inf)
         cand = np.setdiff1d(np.nonzero(viol > tol * max(1.0, t1 - t0))[0], R)
         if len(cand) == 0:
-            return float(np.exp(-(t1 - t0)))
+            return float(np.exp(-(t1 - t0) * scale))
         cand = cand[np.argsort(-viol[cand])[:batch]]
         R = np.r_[R, cand]
         rows = np.vstack([rows, _response_rows(system, cand)])
-    return float(np.exp(-(t1 - t0)))
+    return float(np.exp(-(t1 - t0) * scale))
+
+
+def _harmonic_interior(system, uB):
+    """Interior values (nI,) of the harmonic extension of ``uB`` (nb,)."""
+    return -system.solve_II(system.L_IB @ uB)
 
 
 def _response_rows(system, R):

@@ -1,0 +1,171 @@
+"""The sparse solve layer (core.mesh.solve: CHOLMOD through cholespy, SuperLU fallback) and the
+``uniform`` mode's fast paths on flat meshes (core.disk.uniform)."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from core import flatten, make_surface
+from core.disk.flatten import DiskSystem
+from core.disk.uniform import vertex_bound
+from core.errors import ConformalError
+from core.mesh import solve
+from core.mesh.laplacian import cotan_laplacian
+from core.mesh.validate import check_mesh, normalise_scale
+
+
+def _interior_laplacian(name='bump', n=33):
+    V, F = make_surface(name, n)
+    info = check_mesh(V, F, kind='disk')
+    L = cotan_laplacian(V, F)
+    inner = np.setdiff1d(np.arange(len(V)), info.boundary)
+    return L[inner][:, inner].tocsc()
+
+
+def maze(slots=6, rows=24, corridor=3, bend=0.0):
+    """A flat serpentine (z = bend * a smooth bump): a grid of unit cells with ``slots`` one-cell-wide
+    slots cut alternately from the bottom and the top edge, ``corridor`` cells between them. A disk
+    with a long boundary. Returns V (n,3), F (m,3)."""
+    nx = slots * (corridor + 1) + corridor
+    keep = np.ones((nx, rows), bool)
+    for k in range(slots):
+        c = corridor + k * (corridor + 1)
+        if k % 2 == 0:
+            keep[c, :rows - corridor] = False
+        else:
+            keep[c, corridor:] = False
+    i, j = np.nonzero(keep)
+    q = np.stack([i * (rows + 1) + j, (i + 1) * (rows + 1) + j, (i + 1) * (rows + 1) + j + 1,
+                  i * (rows + 1) + j + 1], 1)
+    F = np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+    X, Y = np.meshgrid(np.arange(nx + 1.0), np.arange(rows + 1.0), indexing='ij')
+    V = np.stack([X.ravel(), Y.ravel(), bend * np.sin(X.ravel() / 7) * np.cos(Y.ravel() / 5)], 1)
+    used = np.unique(F)
+    remap = np.full(len(V), -1)
+    remap[used] = np.arange(len(used))
+    return V[used], remap[F]
+
+
+def test_backend_by_size_and_cholmod_when_installed(monkeypatch):
+    import cholespy  # noqa: F401  (requirements.txt pins it; a platform without a wheel falls back)
+    monkeypatch.delenv('CONFORMAL_SOLVER', raising=False)
+    assert solve.backend() == 'cholmod' and solve.backend(solve.CHOLMOD_MIN) == 'cholmod'
+    assert solve.backend(1000) == 'superlu'
+    assert solve.Factor(_interior_laplacian()).backend == 'superlu'
+    assert solve.Factor(_interior_laplacian(), method='cholmod').backend == 'cholmod'
+    monkeypatch.setenv('CONFORMAL_SOLVER', 'cholmod')
+    assert solve.Factor(_interior_laplacian()).backend == 'cholmod'
+
+
+def test_forced_superlu(monkeypatch):
+    monkeypatch.setenv('CONFORMAL_SOLVER', 'superlu')
+    assert solve.backend() == 'superlu' and solve.backend(10**7) == 'superlu'
+    assert solve.Factor(_interior_laplacian()).backend == 'superlu'
+
+
+@pytest.mark.parametrize('method', solve.BACKENDS)
+def test_solves_match_residual_and_each_other(method):
+    K = _interior_laplacian('saddle', 41)
+    rng = np.random.default_rng(0)
+    b1 = rng.standard_normal(K.shape[0])
+    B = rng.standard_normal((K.shape[0], 11))              # >= SPLIT_RHS: the threaded SuperLU path
+    f = solve.Factor(K, method=method)
+    x1, X = f.solve(b1), f.solve(B)
+    assert x1.shape == b1.shape and X.shape == B.shape
+    scale = np.abs(K).max() * np.abs(X).max()
+    assert np.abs(K @ x1 - b1).max() < 1e-10 * scale
+    assert np.abs(K @ X - B).max() < 1e-10 * scale
+    assert np.allclose(X[:, 3], f.solve(B[:, 3]), rtol=0, atol=1e-12 * np.abs(X).max())
+    ref = sp.linalg.spsolve(K, B)
+    assert np.abs(X - ref).max() < 1e-9 * np.abs(ref).max()
+
+
+def test_fortran_order_and_integer_rhs():
+    K = _interior_laplacian()
+    f = solve.Factor(K)
+    B = np.asfortranarray(np.arange(2 * K.shape[0]).reshape(K.shape[0], 2) % 7)
+    X = f.solve(B)
+    assert np.abs(K @ X - B).max() < 1e-9 * np.abs(B).max()
+
+
+def test_indefinite_falls_back_to_superlu_and_singular_raises():
+    # symmetric, nonsingular, indefinite: CHOLMOD refuses it, LU solves it (a cotan Laplacian of a
+    # mesh with very obtuse triangles can be like this)
+    K = sp.csc_matrix(np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.5], [0.0, 0.5, 3.0]]))
+    f = solve.Factor(K, method='cholmod')
+    assert f.backend == 'superlu'
+    b = np.array([1.0, -2.0, 0.5])
+    assert np.allclose(K @ f.solve(b), b)
+    with pytest.raises(ConformalError) as exc:
+        solve.Factor(sp.csc_matrix(np.ones((3, 3))), method='cholmod')
+    assert exc.value.code == 'degenerate'
+
+
+def test_non_symmetric_goes_to_superlu():
+    K = _interior_laplacian().tolil()
+    K[0, 1] += 1e-3
+    f = solve.Factor(K.tocsc(), method='cholmod')
+    assert f.backend == 'superlu'
+    b = np.ones(K.shape[0])
+    assert np.abs(K.tocsc() @ f.solve(b) - b).max() < 1e-9
+
+
+def test_flatten_same_map_on_both_backends(monkeypatch):
+    V, F = make_surface('edgebump', 33)
+    monkeypatch.setenv('CONFORMAL_SOLVER', 'cholmod')
+    a = flatten(V, F, boundary='area')
+    monkeypatch.setenv('CONFORMAL_SOLVER', 'superlu')
+    b = flatten(V, F, boundary='area')
+    assert np.abs(a.uv - b.uv).max() < 1e-9 * np.abs(a.uv).max()
+    assert a.report['mu_ratio'] == pytest.approx(b.report['mu_ratio'], rel=1e-9)
+
+
+def test_flat_maze_uniform_returns_area_certified():
+    V, F = maze()
+    info = check_mesh(V, F, kind='disk')
+    assert len(info.boundary) > 0.4 * len(V)             # a long boundary
+    area = flatten(V, F, boundary='area')
+    uni = flatten(V, F, boundary='uniform', bound=True)
+    rep = uni.report
+    assert rep['iterations'] == 0 and rep['maps_built'] == 0 and 'area_certified' in rep
+    assert np.allclose(uni.uv, area.uv)
+    assert rep['flips'] == 0 and rep['mu_ratio'] > 1 - 1e-9 and rep['qc_mean'] < 1 + 1e-9
+    assert rep['bound_vertex'] == pytest.approx(1.0, abs=1e-12)
+
+
+def test_curved_mesh_still_optimised():
+    V, F = make_surface('ridge', 33)
+    r = flatten(V, F, boundary='uniform').report
+    assert 'area_certified' not in r and r['iterations'] >= 1
+    assert r['mu_ratio'] > r['ratio_area_mode']
+
+
+def test_nearly_flat_bound_says_so_quickly():
+    V, F = maze(bend=0.05)
+    info = check_mesh(V, F, kind='disk')
+    V, _ = normalise_scale(V)
+    system = DiskSystem(V, F, info.boundary)
+    u0 = system.yamabe(np.zeros(len(system.B)))
+    assert 1e-12 < np.ptp(u0) < 1e-3
+    with pytest.raises(ConformalError) as exc:
+        vertex_bound(system)
+    assert exc.value.code == 'solve_failed' and 'nearly flat' in str(exc.value)
+    r = flatten(V, F, boundary='uniform', bound=True).report
+    assert r['bound_vertex'] is None and 'nearly flat' in r['bound_note']
+
+
+def test_bound_invariant_to_vertex_order_and_matches_flatten():
+    V, F = make_surface('saddle', 25)
+    info = check_mesh(V, F, kind='disk')
+    Vn, _ = normalise_scale(V)
+    b = vertex_bound(DiskSystem(Vn, F, info.boundary))
+    perm = np.random.default_rng(1).permutation(len(V))
+    inv = np.argsort(perm)
+    V2, F2 = V[perm], inv[F]
+    info2 = check_mesh(V2, F2, kind='disk')
+    V2n, _ = normalise_scale(V2)
+    b2 = vertex_bound(DiskSystem(V2n, F2, info2.boundary))
+    assert b == pytest.approx(b2, rel=1e-7)
+    assert 0 < b < 1
+    r = flatten(V, F, boundary='uniform').report
+    assert r['bound_vertex'] == pytest.approx(b, rel=1e-9)
+    assert r['vertex_ratio'] <= b * (1 + 1e-6)        # no map beats the certified vertex optimum
