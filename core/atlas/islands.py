@@ -326,7 +326,7 @@ def shelf_pack(sizes, margin):
 # unwrap
 # ----------------------------------------------------------------------------------------------
 @dataclass
-class UnwrapResult:
+class IslandsResult:
     """``uv`` (N,2) per split vertex; ``F`` (m,3) split vertex of each corner of the input triangles;
     ``vert_of`` (N,) input vertex of each split vertex; ``face_island`` (m,) island of each triangle;
     ``ok`` (m,) False on triangles of islands skipped after an error (their UVs are 0);
@@ -635,7 +635,7 @@ def _lowest_split_vertex(res_vert_of, n_in):
 
 def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='true', pack=True,
            margin=0.01, fit='unit_square', max_faces=DEFAULT_MAX_FACES, allow_loose=True, edges=None,
-           on_error='raise', tri_poly=None, strict_seams=True, progress=None, **options) -> 'UnwrapResult':
+           on_error='raise', tri_poly=None, strict_seams=True, progress=None, **options) -> 'IslandsResult':
     """Cut a triangle mesh into islands along ``seams`` and flatten every island conformally.
 
     V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise. seams: (k,2) int vertex pairs
@@ -657,7 +657,7 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
     strict_seams: a seam that is not an edge of ``F`` is an error; False ignores it (useful when ``F``
     is a selection of a bigger mesh and ``seams`` are all of its seams).
     progress: optional callable ``progress(fraction, message)``. Extra ``options`` go to ``flatten``.
-    Returns ``UnwrapResult``: every island report and the summary carry ``warnings`` (list of str) when
+    Returns ``IslandsResult``: every island report and the summary carry ``warnings`` (list of str) when
     a result has flips, overlaps or qc_mean above 1.5. Raises ``ConformalError`` for bad input."""
     for name, value, allowed in (('holes', holes, HOLE_MODES), ('island_scale', island_scale, ISLAND_SCALES),
                                  ('fit', fit, FITS), ('on_error', on_error, ON_ERROR)):
@@ -839,5 +839,5 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
         'seconds': round(time.perf_counter() - t0, 4),
     }
     report_progress(1.0, 'done')
-    return UnwrapResult(uv=uv, F=Fout, vert_of=vert_of, face_island=face_island, ok=ok,
+    return IslandsResult(uv=uv, F=Fout, vert_of=vert_of, face_island=face_island, ok=ok,
                         islands=reports, report=summary)
