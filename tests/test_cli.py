@@ -1,5 +1,6 @@
 """``python -m core flatten`` and ``make-surface``: outputs, JSON report, errors."""
 import json
+import os
 import subprocess
 import sys
 
@@ -124,3 +125,16 @@ def test_help_cites_files_in_the_repository():
     for name in ('flatten', 'make-surface', 'unwrap'):
         sub = build_parser()._subparsers._group_actions[0].choices[name].format_help()
         assert 'DESIGN' not in sub
+
+
+def test_output_file_has_the_usual_mode(tmp_path):
+    """Outputs are written atomically through a temporary file, but end with the mode the umask gives
+    (not the temporary file's 0600)."""
+    from core.io.obj import write_text
+    out = tmp_path / 'x.txt'
+    old = os.umask(0o022)
+    try:
+        write_text(str(out), 'x\n')
+    finally:
+        os.umask(old)
+    assert (out.stat().st_mode & 0o777) == 0o644 and out.read_text() == 'x\n'

@@ -128,6 +128,9 @@ def write_text(path, text):
     try:
         with os.fdopen(fd, 'w') as fh:
             fh.write(text)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)          # mkstemp makes 0600; an output file gets the usual mode
         os.replace(tmp, path)
     except OSError as exc:
         if os.path.exists(tmp):
