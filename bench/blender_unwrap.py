@@ -7,8 +7,11 @@ import time
 import numpy as np
 
 
-def blender_unwrap(V, F, method='CONFORMAL', **kwargs):
+def blender_unwrap(V, F, method='CONFORMAL', seams=None, **kwargs):
+    """Per-corner UVs (m,3,2) and seconds of ``bpy.ops.uv.unwrap(method)`` on the triangles ``F``;
+    ``seams`` (k,2) vertex pairs are marked as seam edges first (the same input our ``unwrap`` gets)."""
     import bpy
+    from core.mesh.topology import edge_mask
     bpy.ops.wm.read_factory_settings(use_empty=True)
     me = bpy.data.meshes.new('bench')
     me.vertices.add(len(V))
@@ -17,7 +20,11 @@ def blender_unwrap(V, F, method='CONFORMAL', **kwargs):
     me.loops.foreach_set('vertex_index', np.asarray(F, np.int32).ravel())
     me.polygons.add(len(F))
     me.polygons.foreach_set('loop_start', np.arange(0, F.size, 3, dtype=np.int32))
-    me.update()
+    me.update(calc_edges=True)
+    if seams is not None and len(seams):
+        ev = np.empty(2 * len(me.edges), np.int32)
+        me.edges.foreach_get('vertices', ev)
+        me.edges.foreach_set('use_seam', edge_mask(ev.reshape(-1, 2), seams))
     me.uv_layers.new(name='UVMap')
     ob = bpy.data.objects.new('bench', me)
     bpy.context.scene.collection.objects.link(ob)

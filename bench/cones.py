@@ -14,7 +14,7 @@ comparison: spot 16 cones 0.367, 41 cones 0.615; cheburashka 24 cones 0.383, 53 
 rocker-arm 8 cones 0.420, 18 cones 0.617.
 
 ``--big``: the speed target, auto cones plus flattening on ~100k-triangle meshes (spot subdivided
-twice; a blob), with time and peak memory. Meshes are read from ../shared/meshes (relative to the
+twice; a blob), with time and peak memory. Meshes are read from ``meshes.corpus_dir()`` (outside the
 repository); the script says so and skips a mesh that is missing. Cow's non-manifold vertex is split
 by ``cone_unwrap`` itself. Timings are noisy (shared machine)."""
 import argparse
@@ -35,8 +35,9 @@ from core.mesh import topology
 from core.mesh.measures import uv_measures
 from core.mesh.validate import normalise_scale
 from core.surfaces import blob, subdivide
+from meshes import corpus_dir
 
-MESHES = os.path.join(ROOT, '..', 'shared', 'meshes')
+MESHES = corpus_dir()
 MOVING_CONES = {'spot': {16: 0.367, 41: 0.615}, 'cheburashka': {24: 0.383, 53: 0.604},
                 'rocker-arm': {8: 0.420, 18: 0.617}}
 
@@ -44,7 +45,7 @@ MOVING_CONES = {'spot': {16: 0.367, 41: 0.615}, 'cheburashka': {24: 0.383, 53: 0
 def load(name):
     path = os.path.join(MESHES, f'{name}.obj')
     if not os.path.exists(path):
-        print(f"!! {path} is missing: the public meshes live in ../shared/meshes beside the repository; "
+        print(f"!! {path} is missing: the public meshes are not in the repository (set CONFORMAL_MESHES); "
               f"skipping {name}")
         return None
     m = read_obj(path)

@@ -1,4 +1,4 @@
-"""Issue 12: the messy corpus (../shared/meshes) through ``unwrap`` with the defaults, beside Blender's
+"""Issue 12: the messy corpus (``meshes.corpus_dir()``) through ``unwrap`` with the defaults, beside Blender's
 CONFORMAL and ANGLE_BASED unwraps run in this process through bpy, measured with the same measures
 (``core.mesh.measures.uv_measures`` per corner, via ``bench/blender_unwrap.corner_measures``).
 
@@ -11,7 +11,6 @@ import os
 import sys
 import time
 
-import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
@@ -21,48 +20,12 @@ from core.atlas.islands import seams_from_corner_ids, unwrap     # noqa: E402
 from core.errors import ConformalError                           # noqa: E402
 from core.io.obj import read_obj                                 # noqa: E402
 from core.mesh.triangulate import triangulate                    # noqa: E402
+from blender_unwrap import blender_unwrap                         # noqa: E402
+from meshes import corpus_dir                                     # noqa: E402
 
-MESHES = os.path.join(ROOT, '..', 'shared', 'meshes')
+MESHES = corpus_dir()
 NAMES = ['woody', 'alligator', 'suzanne', 'teapot', 'spot', 'cow', 'cheburashka', 'rocker-arm', 'beast',
          'stanford-bunny', 'ogre']
-
-
-def blender_unwrap_seams(V, F, method, seams):
-    """Blender's unwrap (per-corner UVs (m,3,2), seconds) of the triangles ``F`` with ``seams`` (k,2)
-    marked as seam edges (the same input our ``unwrap`` gets)."""
-    import bpy
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    me = bpy.data.meshes.new('bench')
-    me.vertices.add(len(V))
-    me.vertices.foreach_set('co', np.asarray(V, np.float32).ravel())
-    me.loops.add(F.size)
-    me.loops.foreach_set('vertex_index', np.asarray(F, np.int32).ravel())
-    me.polygons.add(len(F))
-    me.polygons.foreach_set('loop_start', np.arange(0, F.size, 3, dtype=np.int32))
-    me.update(calc_edges=True)
-    if seams is not None and len(seams):
-        ev = np.empty(2 * len(me.edges), np.int32)
-        me.edges.foreach_get('vertices', ev)
-        ev = np.sort(ev.reshape(-1, 2), axis=1).astype(np.int64)
-        n = len(V)
-        S = np.sort(np.asarray(seams, np.int64), axis=1)
-        me.edges.foreach_set('use_seam', np.isin(ev[:, 0] * n + ev[:, 1], S[:, 0] * n + S[:, 1]))
-    me.uv_layers.new(name='UVMap')
-    ob = bpy.data.objects.new('bench', me)
-    bpy.context.scene.collection.objects.link(ob)
-    bpy.context.view_layer.objects.active = ob
-    ob.select_set(True)
-    bpy.ops.object.mode_set(mode='EDIT')
-    bpy.ops.mesh.select_all(action='SELECT')
-    t = time.perf_counter()
-    bpy.ops.uv.unwrap(method=method, margin=0.0)
-    seconds = time.perf_counter() - t
-    bpy.ops.object.mode_set(mode='OBJECT')
-    uv = np.empty(F.size * 2, np.float32)
-    me.uv_layers.active.uv.foreach_get('vector', uv)
-    bpy.data.objects.remove(ob)
-    bpy.data.meshes.remove(me)
-    return uv.reshape(-1, 3, 2).astype(np.float64), seconds
 
 
 def main():
@@ -110,7 +73,7 @@ def main():
             closed = 'error no_boundary' in row
             for method in ('CONFORMAL', 'ANGLE_BASED'):
                 try:
-                    uv, sec = blender_unwrap_seams(mesh.V, F, method, seams)
+                    uv, sec = blender_unwrap(mesh.V, F, method, seams=seams)
                     b = corner_measures(mesh.V, F, uv)
                     note = ' (warns: failed to solve)' if closed else ''
                     row += f" {b['flips']} / {b['mu_ratio']:.3g} / {sec:.1f} s{note} |"

@@ -7,7 +7,7 @@ the heat method (potpourri3d, or the three sparse solves in ``heat_method`` when
     .venv/bin/python bench/geodesic_real.py --calibrate      # rows for the error-model fit (JSON)
     .venv/bin/python bench/geodesic_real.py --meshes woody bump
 
-Meshes: the generated surfaces of ``core.surfaces`` and every mesh of ../shared/meshes (relative to the
+Meshes: the generated surfaces of ``core.surfaces`` and every mesh of ``meshes.corpus_dir()`` (outside the
 repository; the script says so and skips them if that folder is missing) that the tool handles as
 disks or disk islands: closed meshes are cut along their OBJ ``vt`` seams when they have some (spot),
 and skipped otherwise (use sphere mode for those). Distances are then on the cut surface, and the
@@ -35,8 +35,9 @@ sys.path.insert(0, ROOT)
 from core.errors import ConformalError  # noqa: E402
 from core.geodesic.solver import GeodesicSolver  # noqa: E402
 from core.surfaces import blob, make_surface  # noqa: E402
+from meshes import corpus_dir  # noqa: E402
 
-MESH_DIR = os.path.join(ROOT, '..', 'shared', 'meshes')
+MESH_DIR = corpus_dir()
 OUT = os.path.join(ROOT, 'out', 'geodesic_real')
 EXCLUDE = 0.02
 REAL = ['woody', 'alligator', 'suzanne', 'teapot', 'spot', 'stanford-bunny', 'cow', 'ogre']
