@@ -32,8 +32,8 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
 
 from ..core.errors import ConformalError
 from . import meshio, targets
-from .apply import ATTR_NAME, RANGE_KEY, REPORT_KEY, apply_all  # noqa: F401  (re-exported)
-from .job import Cancelled, FlattenOptions, Worker, mesh_hash  # noqa: F401  (re-exported)
+from .apply import apply_all
+from .job import Cancelled, FlattenOptions, Worker
 from .prefs import get_prefs
 from .report import run_summary, warnings_of
 from .wording import message

@@ -102,7 +102,7 @@ _solvers = {}          # cache key -> GeodesicSolver, most recently used last
 
 
 def solver_key(digest, boundary, grid, use_seams, seams):
-    """The cache key of a solver: the mesh hash (``ops_flatten.mesh_hash``: positions and polygons),
+    """The cache key of a solver: the mesh hash (``job.mesh_hash``: positions and polygons),
     the options that change the charts or grids, and the seams when they cut."""
     import hashlib
     h = hashlib.blake2b(digest_size=8)

@@ -3,17 +3,17 @@
 The panel shows the flatten options (stored per scene in ``scene.conformal_flatten``), the button, the
 last report of the active mesh (mu ratio, certified bound, flips, conformality, time) and the sections
 other tools add. This module imports the operators; no operator imports it (the shared building
-blocks, ``add_section``, ``register_tool``, ``draw_report``, are in ``addon/sidebar.py`` and
-re-exported here).
+blocks, ``add_section``, ``register_tool``, ``draw_report``, are in ``addon/sidebar.py``).
 """
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
 from . import meshio
-from .ops_flatten import BOUNDARY_ITEMS, FIT_ITEMS, REPORT_KEY, SEAM_ITEMS, UV_OT_conformal_flatten
-from .sidebar import (CATEGORY, PARENT_IDS, add_section, draw_report, fmt as _fmt,  # noqa: F401
-                      register_tool, remove_section, sections, sub_panel_classes, unregister_tool)
+from .apply import REPORT_KEY
+from .ops_flatten import BOUNDARY_ITEMS, FIT_ITEMS, SEAM_ITEMS, UV_OT_conformal_flatten
+from .sidebar import (CATEGORY, PARENT_IDS, add_section, draw_report, fmt as _fmt,
+                      remove_section, sections)
 
 def geodesic_solver_label():
     """Which eikonal solver geodesic distances will use (``core.geodesic.solver.solver_name``)."""

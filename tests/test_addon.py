@@ -354,10 +354,10 @@ def test_no_active_object_fails(addon, bl):
 
 
 def test_report_and_summary(addon, bl):
-    from conformal_flatten.addon import ops_flatten, report, ui
+    from conformal_flatten.addon import apply, report, ui
     obj, _, _ = bump_object(bl)
     bpy.ops.uv.conformal_flatten(boundary='UNIFORM')
-    rep = addon.addon.meshio.load_report(obj.data, ops_flatten.REPORT_KEY)
+    rep = addon.addon.meshio.load_report(obj.data, apply.REPORT_KEY)
     for key in ('mu_ratio', 'bound_vertex', 'flips', 'qc_mean', 'seconds', 'mesh_hash'):
         assert rep[key] is not None, key
     assert rep['bound_vertex'] >= rep['mu_ratio'] * 0.98
@@ -403,7 +403,7 @@ class FakeLayout:
 
 
 def test_panel_draws_report_and_sections(addon, bl):
-    from conformal_flatten.addon import ui
+    from conformal_flatten.addon import sidebar, ui
     from conformal_flatten.addon.prefs import ConformalFlattenPreferences, get_prefs
     obj, _, _ = bump_object(bl)
     panel = ui.VIEW3D_PT_conformal_flatten
@@ -417,15 +417,15 @@ def test_panel_draws_report_and_sections(addon, bl):
 
     def extra(layout, context):
         calls.append(context)
-    ui.add_section("Extra", extra)
+    sidebar.add_section("Extra", extra)
     log.clear()
     panel.draw(fake, bpy.context)
     labels = [t for kind, t in log if kind == 'label']
     assert "Mu ratio" in labels and "Flips" in labels and "Certified bound" in labels
     assert any(t.startswith("Geodesic solver: ") for t in labels)
     assert calls and "Extra" in labels
-    ui.remove_section(extra)
-    assert all(d is not extra for _, d in ui.sections())
+    sidebar.remove_section(extra)
+    assert all(d is not extra for _, d in sidebar.sections())
     prefs = get_prefs(bpy.context)
     assert isinstance(prefs, ConformalFlattenPreferences)       # enabled: the real preferences
     log.clear()
