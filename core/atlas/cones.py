@@ -42,7 +42,7 @@ from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, singular_values
 from ..mesh.solve import Factor
-from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_mesh, normalise_scale
+from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_arrays, check_mesh, normalise_scale
 from .cutgraph import cut_graph, is_disk, reroute_leaf, straighten
 from .islands import boundary_crossings, cut_along_seams
 
@@ -545,11 +545,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         raise ConformalError(f"max_cones must be non-negative, got {max_cones}")
     warnings = []
     # a non-manifold vertex is split (one copy per fan); every other problem is an error
-    try:
-        check_mesh(V, F, kind='surface', max_faces=max_faces, allow_loose=True)
-    except ConformalError as exc:
-        if 'non-manifold vertex' not in exc.problem:
-            raise
+    check_arrays(V, F, max_faces)                 # indices, coordinates, size: before any topology
     Fs, vert_of0, n_split = _split_nonmanifold(V, F)
     Vs = V[vert_of0]
     # drop vertices in no face (allowed: they get no UV and NaN u)
