@@ -65,13 +65,24 @@ def _mesh(path, V, corners, sizes, cuv, lines):
     if not len(V) or not len(sizes):
         raise ConformalError(f"{path} has no vertices or no faces: the mesh is empty")
     V = np.asarray(V, dtype=np.float64).reshape(-1, 3)
-    corners = np.asarray(corners, dtype=np.int64)
+    try:                                   # an index beyond int64 refers to no vertex either
+        corners = np.asarray(corners, dtype=np.int64)
+    except OverflowError:
+        corners = np.array([-1])
     if corners.min() < 0 or corners.max() >= len(V):
         raise ConformalError(f"{path}: a face refers to a vertex that does not exist")
-    lines = np.asarray(lines, dtype=np.int64).reshape(-1, 2)
+    try:
+        lines = np.asarray(lines, dtype=np.int64).reshape(-1, 2)
+    except OverflowError:
+        lines = np.array([[-1, -1]])
     if len(lines) and (lines.min() < 0 or lines.max() >= len(V)):
         raise ConformalError(f"{path}: a line ('l') refers to a vertex that does not exist")
-    return ObjMesh(V, corners, np.asarray(sizes, dtype=np.int64), np.asarray(cuv, dtype=np.int64), lines)
+    try:
+        cuv = np.asarray(cuv, dtype=np.int64)
+    except OverflowError:
+        raise ConformalError(f"{path}: a face refers to a texture coordinate ('vt') that does not exist") \
+            from None
+    return ObjMesh(V, corners, np.asarray(sizes, dtype=np.int64), cuv, lines)
 
 
 def _read_lines(path):
@@ -245,36 +256,64 @@ def _read_fast(data):
     return V, corners, sizes, cuv, edges
 
 
-def _format_rows(A, fmt, head, per=1):
-    """Lines ``head`` + ``per``-value fields ``fmt`` joined by spaces, one line per row of ``A``
-    (r,k*per), in one %-format call; '' for no rows."""
+def _format_rows(A, fmt, head):
+    """Lines ``head`` + the row's values as ``fmt`` joined by spaces, one line per row of ``A``
+    (r,k), in one %-format call; '' for no rows."""
     if not len(A):
         return ''
-    line = head + ' '.join([fmt] * (A.shape[1] // per)) + '\n'
+    line = head + ' '.join([fmt] * A.shape[1]) + '\n'
     return (line * len(A)) % tuple(A.ravel().tolist())
+
+
+def _int_lines(values, seps, line_first, head=b'f '):
+    """ASCII text of non-negative integers ``values`` (t,), each followed by its separator byte
+    ``seps`` (t,) uint8 (b'/', b' ' or b'\\n'), with ``head`` before the values that start a line
+    (``line_first`` (t,) bool). Vectorised: every digit is written by numpy, none by Python."""
+    values = np.asarray(values, np.int64)
+    if len(values) and values.min() < 0:
+        raise ValueError("negative index")
+    powers = 10 ** np.arange(19, dtype=np.int64)
+    nd = np.maximum(np.searchsorted(powers, values, side='right'), 1)       # digits of each value
+    width = nd + 1 + np.where(line_first, len(head), 0)
+    end = np.cumsum(width)
+    out = np.empty(int(end[-1]) if len(end) else 0, np.uint8)
+    last = end - 2                                                           # position of the last digit
+    out[end - 1] = seps
+    for j in range(int(nd.max()) if len(nd) else 0):
+        m = nd > j
+        out[last[m] - j] = 48 + (values[m] // powers[j]) % 10
+    starts = (end - width)[line_first]
+    for i, c in enumerate(head):
+        out[starts + i] = c
+    return out.tobytes().decode('ascii')
 
 
 def _face_text(F, T=None):
     """``f`` lines of faces ``F`` ((m,k) int array or list of 0-based polygons), with ``vt`` indices
     ``T`` (the same structure) written as ``v/vt`` when given."""
-    if isinstance(F, np.ndarray) and F.ndim == 2 and (T is None or np.shape(T) == F.shape):
-        F1 = F.astype(np.int64) + 1
-        if T is None:
-            return _format_rows(F1, '%d', 'f ')
-        pairs = np.stack([F1, np.asarray(T, np.int64) + 1], axis=2).reshape(len(F1), -1)
-        return _format_rows(pairs, '%d/%d', 'f ', per=2)
-    polys = [np.asarray(f, np.int64).ravel() for f in F]
-    if not polys:
+    if isinstance(F, np.ndarray) and F.ndim == 2:
+        corners = np.asarray(F, np.int64).ravel()
+        sizes = np.full(len(F), F.shape[1])
+    else:
+        polys = [np.asarray(f, np.int64).ravel() for f in F]
+        corners = np.concatenate(polys) if polys else np.zeros(0, np.int64)
+        sizes = np.array([len(f) for f in polys], np.int64)
+    if not len(corners):
         return ''
-    sizes = [len(f) for f in polys]
-    fmt = '%d'
-    vals = np.concatenate(polys) + 1
-    if T is not None:
-        fmt = '%d/%d'
-        tex = np.concatenate([np.asarray(t, np.int64).ravel() for t in T]) + 1
-        vals = np.stack([vals, tex], axis=1)
-    line = {k: 'f ' + ' '.join([fmt] * k) + '\n' for k in set(sizes)}
-    return ''.join([line[k] for k in sizes]) % tuple(vals.ravel().tolist())
+    last = np.zeros(len(corners), bool)
+    last[np.cumsum(sizes) - 1] = True
+    first = np.zeros(len(corners), bool)
+    first[np.cumsum(sizes) - sizes] = True
+    sep = np.where(last, ord('\n'), ord(' ')).astype(np.uint8)
+    if T is None:
+        return _int_lines(corners + 1, sep, first)
+    tex = (np.asarray(T, np.int64).ravel() if isinstance(T, np.ndarray) and T.ndim == 2
+           else np.concatenate([np.asarray(t, np.int64).ravel() for t in T]))
+    if len(tex) != len(corners):
+        raise ConformalError(f"UV_faces has {len(tex)} corners, the faces {len(corners)}")
+    vals = np.stack([corners + 1, tex + 1], 1).ravel()
+    seps = np.stack([np.full(len(sep), ord('/'), np.uint8), sep], 1).ravel()
+    return _int_lines(vals, seps, np.stack([first, np.zeros(len(first), bool)], 1).ravel())
 
 
 def write_obj(path, V, F, UV=None, UV_faces=None):
