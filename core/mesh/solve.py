@@ -42,8 +42,9 @@ WORKERS = min(2, os.cpu_count() or 1)
 BACKENDS = ('cholmod', 'superlu')
 SPLIT_RHS = 8           # SuperLU: split at least this many right-hand sides over WORKERS threads
 CHOLMOD_MIN = 300_000   # rows from which CHOLMOD is used (a disk of ~600k triangles; docs/scale.md)
+PARALLEL_MAX = 400_000  # total rows up to which factor_all runs SuperLU factorisations at once (memory)
 ND_MIN = 60_000         # rows from which fill_order computes a nested dissection order
-ND_LEAF = 64            # nested dissection stops splitting parts of at most this many rows
+ND_LEAF = 16            # nested dissection stops splitting parts of at most this many rows
 _SYM_TOL = 1e-12        # relative asymmetry above which a matrix goes to SuperLU
 
 
@@ -60,13 +61,16 @@ def backend(size=None):
 
 def factor_all(*matrices, orders=None):
     """``Factor`` of each matrix (with ``orders``: one fill-reducing order or None per matrix).
-    SuperLU releases the GIL, so its factorisations run on two threads; CHOLMOD's binding holds it
-    (two threads measured no faster), so they run in turn."""
+    SuperLU releases the GIL, so its factorisations run on two threads up to ``PARALLEL_MAX`` rows in
+    all (above, two factorisations' work space at once would lift the peak memory of a 1M-triangle
+    disk from 1.9 GB to 2.3 GB; docs/scale.md); CHOLMOD's binding holds the GIL (two threads measured
+    no faster), so its factorisations run in turn."""
     orders = list(orders) if orders is not None else [None] * len(matrices)
     if len(orders) != len(matrices):
         raise ConformalError(f"{len(orders)} orders for {len(matrices)} matrices")
     methods = [_method(K.shape[0], o) for K, o in zip(matrices, orders)]
-    if WORKERS < 2 or len(matrices) < 2 or 'cholmod' in methods:
+    if WORKERS < 2 or len(matrices) < 2 or 'cholmod' in methods or \
+            sum(K.shape[0] for K in matrices) > PARALLEL_MAX:
         return [Factor(K, order=o) for K, o in zip(matrices, orders)]
     with ThreadPoolExecutor(min(WORKERS, len(matrices))) as ex:
         return list(ex.map(lambda ko: Factor(ko[0], order=ko[1]), zip(matrices, orders)))
