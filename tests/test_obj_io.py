@@ -169,3 +169,22 @@ def test_write_values_exact(tmp_path):
     path = tmp_path / 'v.txt'
     write_values(str(path), x)
     assert np.array_equal(np.array([float(s) for s in path.read_text().split()]), x)
+
+
+def test_vertex_text_written_back_as_read(tmp_path):
+    """The flatten command writes the input's own ``v`` lines back (same numbers, same text)."""
+    src = tmp_path / 'in.obj'
+    src.write_text("# x\nv 0 0 0\nv 1.0 0 0\r\nv\t1 1e0  0\nv 0 1 0.30000000000000004\nf 1 2 3 4\n")
+    mesh = read_obj(str(src))
+    assert mesh.v_text.count(b'\n') == 4
+    out = tmp_path / 'out.obj'
+    uv = mesh.V[:, :2] * 2
+    write_obj(str(out), mesh.V, mesh.polygons(), uv, v_text=mesh.v_text)
+    back = read_obj(str(out))
+    assert np.array_equal(back.V, mesh.V) and np.array_equal(back.corner_verts, mesh.corner_verts)
+    text = out.read_text()
+    assert text.startswith("v 0 0 0\nv 1.0 0 0\nv\t1 1e0  0\nv 0 1 0.30000000000000004\nvt ")
+    # text that does not match the vertices (another count) is not used: V is formatted instead
+    write_obj(str(out), mesh.V[:3], [[0, 1, 2]], v_text=mesh.v_text)
+    assert np.array_equal(read_obj(str(out)).V, mesh.V[:3])
+    assert obj._read_lines(str(src)).v_text is None

@@ -15,10 +15,12 @@ from ..mesh.triangulate import triangulate
 class ObjMesh:
     """Polygons as read: ``V`` (n,3) float64, ``corner_verts`` (c,) int64, ``sizes`` (p,) int64;
     ``corner_uvs`` (c,) int64 the ``vt`` index of each corner (-1 where the face gives none);
-    ``lines`` (k,2) int64 the edges of ``l`` polylines (loose edges)."""
+    ``lines`` (k,2) int64 the edges of ``l`` polylines (loose edges); ``v_text`` the ``v`` lines as
+    read (bytes, one line per vertex; None when the file was read line by line), so that a command
+    writing the same vertices back need not format them again (``write_obj(..., v_text=...)``)."""
 
-    def __init__(self, V, corner_verts, sizes, corner_uvs=None, lines=None):
-        self.V, self.corner_verts, self.sizes = V, corner_verts, sizes
+    def __init__(self, V, corner_verts, sizes, corner_uvs=None, lines=None, v_text=None):
+        self.V, self.corner_verts, self.sizes, self.v_text = V, corner_verts, sizes, v_text
         self.corner_uvs = np.full(len(corner_verts), -1, np.int64) if corner_uvs is None else corner_uvs
         self.lines = np.zeros((0, 2), np.int64) if lines is None else lines
 
@@ -57,7 +59,9 @@ def read_obj(path):
     parts = _read_fast(data)
     if parts is None:
         return _read_lines(path)
-    return _mesh(path, *parts)
+    mesh = _mesh(path, *parts[:5])
+    mesh.v_text = parts[5]
+    return mesh
 
 
 def _mesh(path, V, corners, sizes, cuv, lines):
@@ -189,7 +193,7 @@ def _read_fast(data):
         tok, line = _token_lines(sub, first)
         if len(tok) != 4 * nv or (np.bincount(line, minlength=nv) != 4).any():
             return None
-        sub = sub.copy()
+        v_text = sub.tobytes()
         sub[first] = _SP
         with warnings.catch_warnings():
             warnings.simplefilter('ignore')        # numpy warns where it stops on a bad number
@@ -197,7 +201,7 @@ def _read_fast(data):
         if len(V) != 3 * nv:
             return None
     else:
-        V = np.zeros(0)
+        V, v_text = np.zeros(0), b''
 
     # faces: tokens 'a', 'a/b', 'a//c', 'a/b/c' of optionally signed integers
     sub, first = _line_bytes(buf, starts, ends, is_f)
@@ -253,7 +257,7 @@ def _read_fast(data):
         n_k = int(nv_before[k])
         idx = [i - 1 if i > 0 else n_k + i for i in idx]
         edges.extend(zip(idx[:-1], idx[1:]))
-    return V, corners, sizes, cuv, edges
+    return V, corners, sizes, cuv, edges, v_text
 
 
 def _format_rows(A, fmt, head):
@@ -316,14 +320,19 @@ def _face_text(F, T=None):
     return _int_lines(vals, seps, np.stack([first, np.zeros(len(first), bool)], 1).ravel())
 
 
-def write_obj(path, V, F, UV=None, UV_faces=None):
+def write_obj(path, V, F, UV=None, UV_faces=None, v_text=None):
     """Write ``V`` (n,3) and faces ``F`` ((m,k) array or a list of polygons). With ``UV`` (n,2) and no
     ``UV_faces``: one ``vt`` per vertex and ``f v/vt`` with the same index. With ``UV`` (t,2) and
     ``UV_faces`` (the same structure as ``F``, 0-based ``vt`` indices): per-corner UVs, as needed when
     islands split vertices. Numbers are written with 17 significant digits (an exact round trip).
+    ``v_text`` (optional): the ``v`` lines of ``V`` as read (``ObjMesh.v_text``), written as they are
+    instead of formatting ``V`` again (one line per vertex, checked).
     Written to a temporary file first, so a failure leaves no partial output."""
     V = np.asarray(V, np.float64).reshape(-1, 3)
-    parts = [_format_rows(V, '%.17g', 'v ')]
+    if v_text is not None and v_text.count(b'\n') == len(V) and (not V.size or v_text.endswith(b'\n')):
+        parts = [v_text.decode('ascii')]
+    else:
+        parts = [_format_rows(V, '%.17g', 'v ')]
     if UV is not None:
         parts.append(_format_rows(np.asarray(UV, np.float64).reshape(-1, 2), '%.17g', 'vt '))
         parts.append(_face_text(F, F if UV_faces is None else UV_faces))
