@@ -41,6 +41,7 @@ except ImportError:                      # pragma: no cover - depends on the pla
 WORKERS = min(2, os.cpu_count() or 1)
 BACKENDS = ('cholmod', 'superlu')
 SPLIT_RHS = 8           # SuperLU: split at least this many right-hand sides over WORKERS threads
+BLOCK_BYTES = 16 << 20  # SuperLU: right-hand sides are solved in column blocks of at most this size
 CHOLMOD_MIN = 300_000   # rows from which CHOLMOD is used (a disk of ~600k triangles; docs/scale.md)
 PARALLEL_MAX = 400_000  # total rows up to which factor_all runs SuperLU factorisations at once (memory)
 ND_MIN = 60_000         # rows from which fill_order computes a nested dissection order
@@ -289,20 +290,26 @@ class Factor:
             x = self._solve_cholmod(b)
         else:
             rows = slice(None) if self._order is None else self._order
-            if self._order is not None:
-                b = b[self._order]
             x = np.empty(b.shape)
-            if b.ndim == 2 and b.shape[1] >= SPLIT_RHS and WORKERS > 1:
-                # SuperLU releases the GIL: split many right-hand sides over the cores; each block's
-                # solution goes straight to its place (no concatenated copy: less peak memory)
-                cuts = np.linspace(0, b.shape[1], WORKERS + 1).astype(int)
-
-                def block(i):
-                    x[rows, cuts[i]:cuts[i + 1]] = self._lu.solve(b[:, cuts[i]:cuts[i + 1]])
-                with ThreadPoolExecutor(WORKERS) as ex:
-                    list(ex.map(block, range(WORKERS)))
+            if b.ndim == 1:
+                x[rows] = self._lu.solve(b[rows])
             else:
-                x[rows] = self._lu.solve(b)
+                # columns in blocks of at most BLOCK_BYTES, each permuted, solved and put in its place
+                # on its own (the peak memory of many right-hand sides stays near the output's); SuperLU
+                # releases the GIL, so with SPLIT_RHS or more columns the blocks go to two threads
+                r = b.shape[1]
+                w = max(1, min(r, BLOCK_BYTES // (8 * max(1, b.shape[0]))))
+                if r >= SPLIT_RHS and WORKERS > 1:
+                    w = min(w, -(-r // WORKERS))
+
+                def block(c0):
+                    x[rows, c0:c0 + w] = self._lu.solve(b[rows, c0:c0 + w])
+                if r >= SPLIT_RHS and WORKERS > 1:
+                    with ThreadPoolExecutor(WORKERS) as ex:
+                        list(ex.map(block, range(0, r, w)))
+                else:
+                    for c0 in range(0, r, w):
+                        block(c0)
         if not np.all(np.isfinite(x)):
             raise ConformalError("the linear solve produced NaN: the mesh is numerically degenerate "
                                  "(needle or zero-area triangles)", 'degenerate', 'clean_mesh')
