@@ -169,3 +169,60 @@ def test_bound_invariant_to_vertex_order_and_matches_flatten():
     r = flatten(V, F, boundary='uniform').report
     assert r['bound_vertex'] == pytest.approx(b, rel=1e-9)
     assert r['vertex_ratio'] <= b * (1 + 1e-6)        # no map beats the certified vertex optimum
+
+
+def _bump_system(n=65):
+    V, F = make_surface('bump', n)
+    info = check_mesh(V, F, kind='disk')
+    L = cotan_laplacian(V, F)
+    inner = np.setdiff1d(np.arange(len(V)), info.boundary)
+    return V, L, inner
+
+
+def test_fill_order_is_a_permutation_that_cuts_fill():
+    V, L, inner = _bump_system(65)
+    K = L[inner][:, inner].tocsc()
+    assert solve.fill_order(V[inner], K) is None                 # below ND_MIN: the solver orders
+    order = solve.fill_order(V[inner], K, min_size=0, leaf=16)
+    assert np.array_equal(np.sort(order), np.arange(K.shape[0]))
+    # the same matrix with its rows shuffled: factored in the given order, SuperLU's fill is that of
+    # the nested dissection, far below the shuffled natural order and no worse than MMD's
+    shuffle = np.random.default_rng(0).permutation(K.shape[0])
+    Ks = K[shuffle][:, shuffle].tocsc()
+    nd = solve.Factor(Ks, order=solve.fill_order(V[inner][shuffle], Ks, min_size=0, leaf=16))
+    mmd = solve.Factor(Ks, method='superlu')
+    natural = sp.linalg.splu(Ks, permc_spec='NATURAL', diag_pivot_thresh=0.0,
+                             options=dict(SymmetricMode=True))
+    fill = {name: f.L.nnz + f.U.nnz for name, f in (('nd', nd._lu), ('mmd', mmd._lu), ('natural', natural))}
+    assert nd.backend == 'superlu' and nd.ordering == 'given' and mmd.ordering == 'mmd'
+    assert fill['nd'] < 0.1 * fill['natural'] and fill['nd'] < 1.2 * fill['mmd'], fill
+    rng = np.random.default_rng(1)
+    B = rng.standard_normal((K.shape[0], 9))                 # >= SPLIT_RHS: threaded solve, reordered
+    X = nd.solve(B)
+    ref = sp.linalg.spsolve(Ks, B)
+    assert np.abs(X - ref).max() < 1e-9 * np.abs(ref).max()
+    assert np.allclose(nd.solve(B[:, 4]), X[:, 4], rtol=0, atol=1e-12 * np.abs(X).max())
+
+
+def test_sub_order_keeps_the_relative_order():
+    order = np.array([4, 0, 3, 1, 2])
+    assert solve.sub_order(order, np.array([0, 2, 3])).tolist() == [0, 2, 1]    # rows 0, 3, 2
+    mask = np.array([True, True, False, True, True])
+    assert solve.sub_order(order, mask).tolist() == [3, 0, 2, 1]
+    assert solve.sub_order(None, mask) is None
+    with pytest.raises(ConformalError):
+        solve.Factor(sp.identity(3, format='csc'), order=np.arange(4))
+
+
+def test_flatten_same_map_with_nested_dissection(monkeypatch):
+    """The big-mesh path (one nested dissection order for both factorisations) gives the map of the
+    solver's own ordering."""
+    V, F = make_surface('ridge', 49)
+    monkeypatch.delenv('CONFORMAL_SOLVER', raising=False)
+    a = flatten(V, F, boundary='area')
+    monkeypatch.setattr(solve, 'ND_MIN', 100)
+    b = flatten(V, F, boundary='area')
+    assert b.report['solver'] == 'superlu'
+    assert np.abs(a.uv - b.uv).max() < 1e-9 * np.abs(a.uv).max()
+    for key in ('mu_ratio', 'qc_mean', 'flips'):
+        assert b.report[key] == pytest.approx(a.report[key], rel=1e-9)

@@ -1,7 +1,8 @@
 """Command line: ``python -m core COMMAND ...``. Errors exit with code 2 and one line on stderr.
 
 Each command lives in its own module with ``add_arguments(parser)`` and ``run(args) -> int``; the
-table below names them, and modules are imported only when their command runs."""
+table below names them, and a command's module is imported only when that command is parsed or runs
+(``python -m core --help`` lists the commands from the table alone)."""
 import argparse
 import importlib
 import os
@@ -26,20 +27,33 @@ class _Parser(argparse.ArgumentParser):
         raise ConformalError(f"{self.prog}: {message}")
 
 
-def build_parser():
+def build_parser(only=None):
+    """The command-line parser. ``only``: the name of the one command whose arguments are set up
+    (its module imported); None sets up every command."""
     parser = _Parser(prog='python -m core', description='Conformal Flatten core tools')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
     sub.required = True
     for name, (module, help_text) in COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
         p.set_defaults(_module=module)
-        importlib.import_module(f'.{module}', __package__).add_arguments(p)
+        if only is None or name == only:
+            importlib.import_module(f'.{module}', __package__).add_arguments(p)
     return parser
+
+
+def _command(argv):
+    """The command named in ``argv`` (the first argument not starting with '-'), or None."""
+    for a in argv:
+        if not a.startswith('-'):
+            return a if a in COMMANDS else None
+    return None
 
 
 def main(argv=None):
     try:
-        args = build_parser().parse_args(argv)
+        argv = sys.argv[1:] if argv is None else list(argv)
+        command = _command(argv)
+        args = build_parser(command if command is not None else '').parse_args(argv)
         module = importlib.import_module(f'.{args._module}', __package__)
         return module.run(args) or 0
     except ConformalError as exc:

@@ -25,7 +25,7 @@ from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian, face_gradients, gradient, divergence
 from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians, signed_uv_areas
 from ..mesh.intrinsic import intrinsic_delaunay
-from ..mesh.solve import Factor, factor_all
+from ..mesh.solve import Factor, factor_all, fill_order, sub_order
 from .lscm import lscm
 from .uniform import optimise, vertex_bound
 from ..mesh.validate import check_mesh, degenerate_faces, normalise_scale, DEFAULT_MAX_FACES
@@ -95,8 +95,11 @@ class DiskSystem:
         keep = np.arange(n) != self.B[0]
         self._keep = keep
         if neumann and len(self.I):
-            # L_II for the Yamabe and harmonic solves, L without one vertex for the conjugate
-            self._II, self._neumann = factor_all(self.L_II, self.L[keep][:, keep])
+            # L_II for the Yamabe and harmonic solves, L without one vertex for the conjugate; on big
+            # meshes both in one nested dissection order of the vertices (docs/scale.md)
+            order = fill_order(V, self.L)
+            self._II, self._neumann = factor_all(self.L_II, self.L[keep][:, keep],
+                                                 orders=(sub_order(order, self.I), sub_order(order, keep)))
         else:
             self._II = Factor(self.L_II) if len(self.I) else None
             self._neumann = None

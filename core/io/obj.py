@@ -4,6 +4,7 @@ Vertices are identified by their ``v`` index, so UV seams (``vt`` indices) in th
 the mesh. Faces may be n-gons in any ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn`` form."""
 import os
 import tempfile
+import warnings
 
 import numpy as np
 
@@ -14,10 +15,12 @@ from ..mesh.triangulate import triangulate
 class ObjMesh:
     """Polygons as read: ``V`` (n,3) float64, ``corner_verts`` (c,) int64, ``sizes`` (p,) int64;
     ``corner_uvs`` (c,) int64 the ``vt`` index of each corner (-1 where the face gives none);
-    ``lines`` (k,2) int64 the edges of ``l`` polylines (loose edges)."""
+    ``lines`` (k,2) int64 the edges of ``l`` polylines (loose edges); ``v_text`` the ``v`` lines as
+    read (bytes, one line per vertex; None when the file was read line by line), so that a command
+    writing the same vertices back need not format them again (``write_obj(..., v_text=...)``)."""
 
-    def __init__(self, V, corner_verts, sizes, corner_uvs=None, lines=None):
-        self.V, self.corner_verts, self.sizes = V, corner_verts, sizes
+    def __init__(self, V, corner_verts, sizes, corner_uvs=None, lines=None, v_text=None):
+        self.V, self.corner_verts, self.sizes, self.v_text = V, corner_verts, sizes, v_text
         self.corner_uvs = np.full(len(corner_verts), -1, np.int64) if corner_uvs is None else corner_uvs
         self.lines = np.zeros((0, 2), np.int64) if lines is None else lines
 
@@ -43,7 +46,51 @@ def text_lines(path):
 
 
 def read_obj(path):
-    """Read an OBJ file into an ``ObjMesh``. Raises ``ConformalError`` on unreadable input."""
+    """Read an OBJ file into an ``ObjMesh``. Raises ``ConformalError`` on unreadable input.
+
+    The whole file is parsed at once with numpy (``_read_fast``); a file the fast parser does not
+    accept exactly as written (odd whitespace, ``+1``, malformed tokens...) is read line by line
+    (``_read_lines``), which also words the errors. Both give the same result on every file."""
+    try:
+        with open(path, 'rb') as fh:
+            data = fh.read()
+    except OSError as exc:
+        raise ConformalError(f"cannot read {path}: {exc.strerror}") from None
+    parts = _read_fast(data)
+    if parts is None:
+        return _read_lines(path)
+    mesh = _mesh(path, *parts[:5])
+    mesh.v_text = parts[5]
+    return mesh
+
+
+def _mesh(path, V, corners, sizes, cuv, lines):
+    """``ObjMesh`` from parsed arrays after the checks every reader shares."""
+    if not len(V) or not len(sizes):
+        raise ConformalError(f"{path} has no vertices or no faces: the mesh is empty")
+    V = np.asarray(V, dtype=np.float64).reshape(-1, 3)
+    try:                                   # an index beyond int64 refers to no vertex either
+        corners = np.asarray(corners, dtype=np.int64)
+    except OverflowError:
+        corners = np.array([-1])
+    if corners.min() < 0 or corners.max() >= len(V):
+        raise ConformalError(f"{path}: a face refers to a vertex that does not exist")
+    try:
+        lines = np.asarray(lines, dtype=np.int64).reshape(-1, 2)
+    except OverflowError:
+        lines = np.array([[-1, -1]])
+    if len(lines) and (lines.min() < 0 or lines.max() >= len(V)):
+        raise ConformalError(f"{path}: a line ('l') refers to a vertex that does not exist")
+    try:
+        cuv = np.asarray(cuv, dtype=np.int64)
+    except OverflowError:
+        raise ConformalError(f"{path}: a face refers to a texture coordinate ('vt') that does not exist") \
+            from None
+    return ObjMesh(V, corners, np.asarray(sizes, dtype=np.int64), cuv, lines)
+
+
+def _read_lines(path):
+    """``read_obj`` line by line: the reference semantics and the error wording."""
     V, corners, sizes, cuv, lines = [], [], [], [], []
     nvt = 0
     for lineno, line in text_lines(path):
@@ -77,44 +124,227 @@ def read_obj(path):
         except (ValueError, IndexError) as exc:
             raise ConformalError(f"{path} line {lineno}: cannot parse {line.strip()[:60]!r} ({exc})") \
                 from None
-    if not V or not sizes:
-        raise ConformalError(f"{path} has no vertices or no faces: the mesh is empty")
-    V = np.array(V, dtype=np.float64)
-    corners = np.array(corners, dtype=np.int64)
-    if corners.min() < 0 or corners.max() >= len(V):
-        raise ConformalError(f"{path}: a face refers to a vertex that does not exist")
-    lines = np.array(lines, dtype=np.int64).reshape(-1, 2)
-    if len(lines) and (lines.min() < 0 or lines.max() >= len(V)):
-        raise ConformalError(f"{path}: a line ('l') refers to a vertex that does not exist")
-    return ObjMesh(V, corners, np.array(sizes, dtype=np.int64), np.array(cuv, dtype=np.int64), lines)
+    return _mesh(path, V, corners, sizes, cuv, lines)
 
 
-def _index_lists(F):
-    return [list(map(int, f)) for f in (np.asarray(F, np.int64) + 1 if isinstance(F, np.ndarray)
-                                        else (np.asarray(f, np.int64) + 1 for f in F))]
+_SP, _TAB, _NL, _SLASH, _MINUS = 32, 9, 10, 47, 45
 
 
-def write_obj(path, V, F, UV=None, UV_faces=None):
+def _line_bytes(buf, starts, ends, pick):
+    """The bytes of the lines ``pick`` (bool per line) of ``buf`` (uint8), each ending in a newline,
+    concatenated (uint8), and the offsets of their first bytes in that array."""
+    keep = np.repeat(pick, ends - starts + 1)
+    out = buf[keep]
+    lens = (ends - starts + 1)[pick]
+    first = np.zeros(len(lens), np.int64)
+    np.cumsum(lens[:-1], out=first[1:])
+    return out, first
+
+
+def _token_lines(sub, first):
+    """(start offsets of the whitespace-separated tokens of ``sub``, line of each token) for
+    newline-terminated lines starting at ``first``."""
+    ws = (sub == _SP) | (sub == _TAB) | (sub == _NL)
+    tok = np.flatnonzero(~ws & np.r_[True, ws[:-1]])
+    return tok, np.searchsorted(first, tok, side='right') - 1
+
+
+def _read_fast(data):
+    """Whole-buffer parse of OBJ bytes: (V (n*3,) float64, corners, sizes, corner uvs, line edges),
+    or None when the text needs the line-by-line reader (anything it would not parse identically)."""
+    if b'\r' in data:
+        data = data.replace(b'\r\n', b'\n').replace(b'\r', b'\n')
+    if not data.endswith(b'\n'):
+        data += b'\n'
+    buf = np.frombuffer(data, np.uint8)
+    ends = np.flatnonzero(buf == _NL)
+    starts = np.r_[0, ends[:-1] + 1]
+    length = ends - starts
+    c0 = buf[starts]
+    if ((c0 == _SP) | (c0 == _TAB)).any():
+        import re                      # indented lines: strip the indentation, which split() ignores
+        return _read_fast(re.sub(rb'(?m)^[ \t]+', b'', data))
+
+    def at(k):
+        return np.where(length > k, buf[np.minimum(starts + k, len(buf) - 1)], _NL)
+    c1, c2 = at(1), at(2)
+
+    def sep(c):
+        return (c == _SP) | (c == _TAB) | (c == _NL)
+
+    def odd(c):                        # a byte str.split() might treat as whitespace
+        return ((c < 32) & ~sep(c)) | (c >= 127)
+    key = (c0 == ord('v')) | (c0 == ord('f')) | (c0 == ord('l'))
+    if odd(c0).any() or (key & (odd(c1) | ((c1 == ord('t')) & odd(c2)))).any():
+        return None
+    is_v = (c0 == ord('v')) & sep(c1)
+    is_vt = (c0 == ord('v')) & (c1 == ord('t')) & sep(c2)
+    is_f = (c0 == ord('f')) & sep(c1)
+    is_l = (c0 == ord('l')) & sep(c1)
+    nv_before = np.cumsum(is_v) - is_v
+    nvt_before = np.cumsum(is_vt) - is_vt
+
+    # vertices: exactly three numbers after 'v' on every line, parsed in one call
+    sub, first = _line_bytes(buf, starts, ends, is_v)
+    nv = len(first)
+    if nv:
+        if odd(sub).any():
+            return None
+        tok, line = _token_lines(sub, first)
+        if len(tok) != 4 * nv or (np.bincount(line, minlength=nv) != 4).any():
+            return None
+        v_text = sub.tobytes()
+        sub[first] = _SP
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore')        # numpy warns where it stops on a bad number
+            V = np.fromstring(sub.tobytes(), dtype=np.float64, sep=' ')
+        if len(V) != 3 * nv:
+            return None
+    else:
+        V, v_text = np.zeros(0), b''
+
+    # faces: tokens 'a', 'a/b', 'a//c', 'a/b/c' of optionally signed integers
+    sub, first = _line_bytes(buf, starts, ends, is_f)
+    nf = len(first)
+    if nf:
+        sub = sub.copy()
+        sub[first] = _SP
+        digit = (sub >= 48) & (sub <= 57)
+        slash, minus = sub == _SLASH, sub == _MINUS
+        ws = (sub == _SP) | (sub == _TAB) | (sub == _NL)
+        if not (digit | slash | minus | ws).all():
+            return None
+        brk = ws | slash                           # fields: runs between whitespace and slashes
+        run = np.flatnonzero(~brk & np.r_[True, brk[:-1]])
+        run_end = np.flatnonzero(~brk & np.r_[brk[1:], True]) + 1
+        mpos = np.flatnonzero(minus)               # a minus only leads a field, before a digit
+        if (slash[1:] & ws[:-1]).any() or (run_end - run > 16).any() or \
+                (len(mpos) and not (brk[mpos - 1].all() and digit[mpos + 1].all())):
+            return None
+        sub[slash] = _SP
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore')
+            val = np.fromstring(sub.tobytes(), dtype=np.int64, sep=' ')
+        if len(val) != len(run):
+            return None
+        f0 = ws[run - 1]                           # the first field of a token (the v index)
+        f1 = np.zeros(len(run), bool)              # the second (vt): one slash after a first field
+        f1[1:] = ~f0[1:] & f0[:-1] & (run[1:] - run_end[:-1] == 1)
+        tok = run[f0]
+        sizes = np.diff(np.r_[np.searchsorted(tok, first), len(tok)])
+        idx = val[f0]
+        if (sizes < 3).any() or (idx == 0).any():
+            return None
+        line_of = np.repeat(np.flatnonzero(is_f), sizes)
+        corners = np.where(idx > 0, idx - 1, nv_before[line_of] + idx)
+        tok_of_run = np.cumsum(f0) - 1
+        cuv = np.full(len(tok), -1, np.int64)
+        t1 = tok_of_run[f1]
+        tv = val[f1]
+        rel = nvt_before[line_of[t1]] + tv
+        cuv[t1] = np.where(tv > 0, tv - 1, np.where(tv < 0, rel, -1))
+    else:
+        corners = cuv = sizes = np.zeros(0, np.int64)
+
+    # polylines ('l'): rare and short, parsed line by line
+    edges = []
+    for k in np.flatnonzero(is_l).tolist():
+        text = data[starts[k]:ends[k]].decode('utf-8', 'replace')
+        try:
+            idx = [int(q.split('/')[0]) for q in text.split()[1:]]
+        except ValueError:
+            return None
+        n_k = int(nv_before[k])
+        idx = [i - 1 if i > 0 else n_k + i for i in idx]
+        edges.extend(zip(idx[:-1], idx[1:]))
+    return V, corners, sizes, cuv, edges, v_text
+
+
+def _format_rows(A, fmt, head):
+    """Lines ``head`` + the row's values as ``fmt`` joined by spaces, one line per row of ``A``
+    (r,k), in one %-format call; '' for no rows."""
+    if not len(A):
+        return ''
+    line = head + ' '.join([fmt] * A.shape[1]) + '\n'
+    return (line * len(A)) % tuple(A.ravel().tolist())
+
+
+def _int_lines(values, seps, line_first, head=b'f '):
+    """ASCII text of non-negative integers ``values`` (t,), each followed by its separator byte
+    ``seps`` (t,) uint8 (b'/', b' ' or b'\\n'), with ``head`` before the values that start a line
+    (``line_first`` (t,) bool). Vectorised: every digit is written by numpy, none by Python."""
+    values = np.asarray(values, np.int64)
+    if len(values) and values.min() < 0:
+        raise ValueError("negative index")
+    powers = 10 ** np.arange(19, dtype=np.int64)
+    nd = np.maximum(np.searchsorted(powers, values, side='right'), 1)       # digits of each value
+    width = nd + 1 + np.where(line_first, len(head), 0)
+    end = np.cumsum(width)
+    out = np.empty(int(end[-1]) if len(end) else 0, np.uint8)
+    last = end - 2                                                           # position of the last digit
+    out[end - 1] = seps
+    for j in range(int(nd.max()) if len(nd) else 0):
+        m = nd > j
+        out[last[m] - j] = 48 + (values[m] // powers[j]) % 10
+    starts = (end - width)[line_first]
+    for i, c in enumerate(head):
+        out[starts + i] = c
+    return out.tobytes().decode('ascii')
+
+
+def _face_text(F, T=None):
+    """``f`` lines of faces ``F`` ((m,k) int array or list of 0-based polygons), with ``vt`` indices
+    ``T`` (the same structure) written as ``v/vt`` when given."""
+    if isinstance(F, np.ndarray) and F.ndim == 2:
+        corners = np.asarray(F, np.int64).ravel()
+        sizes = np.full(len(F), F.shape[1])
+    else:
+        polys = [np.asarray(f, np.int64).ravel() for f in F]
+        corners = np.concatenate(polys) if polys else np.zeros(0, np.int64)
+        sizes = np.array([len(f) for f in polys], np.int64)
+    if not len(corners):
+        return ''
+    last = np.zeros(len(corners), bool)
+    last[np.cumsum(sizes) - 1] = True
+    first = np.zeros(len(corners), bool)
+    first[np.cumsum(sizes) - sizes] = True
+    sep = np.where(last, ord('\n'), ord(' ')).astype(np.uint8)
+    if T is None:
+        return _int_lines(corners + 1, sep, first)
+    tex = (np.asarray(T, np.int64).ravel() if isinstance(T, np.ndarray) and T.ndim == 2
+           else np.concatenate([np.asarray(t, np.int64).ravel() for t in T]))
+    if len(tex) != len(corners):
+        raise ConformalError(f"UV_faces has {len(tex)} corners, the faces {len(corners)}")
+    vals = np.stack([corners + 1, tex + 1], 1).ravel()
+    seps = np.stack([np.full(len(sep), ord('/'), np.uint8), sep], 1).ravel()
+    return _int_lines(vals, seps, np.stack([first, np.zeros(len(first), bool)], 1).ravel())
+
+
+def write_obj(path, V, F, UV=None, UV_faces=None, v_text=None):
     """Write ``V`` (n,3) and faces ``F`` ((m,k) array or a list of polygons). With ``UV`` (n,2) and no
     ``UV_faces``: one ``vt`` per vertex and ``f v/vt`` with the same index. With ``UV`` (t,2) and
     ``UV_faces`` (the same structure as ``F``, 0-based ``vt`` indices): per-corner UVs, as needed when
-    islands split vertices. Written to a temporary file first, so a failure leaves no partial output."""
-    V = np.asarray(V, np.float64)
-    F = _index_lists(F)
-    T = F if UV_faces is None else _index_lists(UV_faces)
-    lines = [f"v {x!r} {y!r} {z!r}\n" for x, y, z in V.tolist()]      # repr: exact round trip
-    if UV is not None:
-        lines += [f"vt {u!r} {v!r}\n" for u, v in np.asarray(UV, float).tolist()]
-        lines += ['f ' + ' '.join(f"{i}/{j}" for i, j in zip(f, t)) + '\n' for f, t in zip(F, T)]
+    islands split vertices. Numbers are written with 17 significant digits (an exact round trip).
+    ``v_text`` (optional): the ``v`` lines of ``V`` as read (``ObjMesh.v_text``), written as they are
+    instead of formatting ``V`` again (one line per vertex, checked).
+    Written to a temporary file first, so a failure leaves no partial output."""
+    V = np.asarray(V, np.float64).reshape(-1, 3)
+    if v_text is not None and v_text.count(b'\n') == len(V) and (not V.size or v_text.endswith(b'\n')):
+        parts = [v_text.decode('ascii')]
     else:
-        lines += ['f ' + ' '.join(str(i) for i in f) + '\n' for f in F]
-    write_text(path, ''.join(lines))
+        parts = [_format_rows(V, '%.17g', 'v ')]
+    if UV is not None:
+        parts.append(_format_rows(np.asarray(UV, np.float64).reshape(-1, 2), '%.17g', 'vt '))
+        parts.append(_face_text(F, F if UV_faces is None else UV_faces))
+    else:
+        parts.append(_face_text(F))
+    write_text(path, ''.join(parts))
 
 
 def write_values(path, values):
-    """Write one number per line (``values`` (n,), ``repr``: exact round trip), atomically like
-    ``write_text``."""
-    write_text(path, ''.join(f"{v!r}\n" for v in np.asarray(values, np.float64).tolist()))
+    """Write one number per line (``values`` (n,), 17 significant digits: an exact round trip),
+    atomically like ``write_text``."""
+    write_text(path, _format_rows(np.asarray(values, np.float64).reshape(-1, 1), '%.17g', ''))
 
 
 def write_text(path, text):

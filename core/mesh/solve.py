@@ -16,6 +16,13 @@ Two backends (docs/scale.md):
 ``backend(size)`` names the backend a new factorisation of a ``size`` x ``size`` matrix uses;
 ``Factor.backend`` the one that ran. ``CONFORMAL_SOLVER=superlu`` or ``=cholmod`` in the environment
 forces one for all sizes (for comparisons).
+
+Big meshes: a caller that knows where its unknowns lie (vertex positions) passes a fill-reducing
+``order`` from ``fill_order`` (nested dissection by recursive coordinate bisection, separators last;
+docs/scale.md). SuperLU then factors the permuted matrix in that order ('NATURAL'), which measured
+about half of CHOLMOD's or SuperLU-with-MMD's factor time at 1M triangles, and the factorisations run
+on two threads. ``sub_order`` restricts one order of all vertices to a submatrix (interior vertices,
+all but one vertex), so one ordering serves every matrix of a mesh.
 """
 import os
 from concurrent.futures import ThreadPoolExecutor
@@ -34,7 +41,11 @@ except ImportError:                      # pragma: no cover - depends on the pla
 WORKERS = min(2, os.cpu_count() or 1)
 BACKENDS = ('cholmod', 'superlu')
 SPLIT_RHS = 8           # SuperLU: split at least this many right-hand sides over WORKERS threads
+BLOCK_BYTES = 16 << 20  # SuperLU: right-hand sides are solved in column blocks of at most this size
 CHOLMOD_MIN = 300_000   # rows from which CHOLMOD is used (a disk of ~600k triangles; docs/scale.md)
+PARALLEL_MAX = 400_000  # total rows up to which factor_all runs SuperLU factorisations at once (memory)
+ND_MIN = 60_000         # rows from which fill_order computes a nested dissection order
+ND_LEAF = 16            # nested dissection stops splitting parts of at most this many rows
 _SYM_TOL = 1e-12        # relative asymmetry above which a matrix goes to SuperLU
 
 
@@ -49,13 +60,117 @@ def backend(size=None):
     return 'superlu'
 
 
-def factor_all(*matrices):
-    """``Factor`` of each matrix. SuperLU releases the GIL, so its factorisations run on two
-    threads; CHOLMOD's binding holds it (two threads measured no faster), so they run in turn."""
-    if WORKERS < 2 or len(matrices) < 2 or any(backend(K.shape[0]) == 'cholmod' for K in matrices):
-        return [Factor(K) for K in matrices]
+def factor_all(*matrices, orders=None):
+    """``Factor`` of each matrix (with ``orders``: one fill-reducing order or None per matrix).
+    SuperLU releases the GIL, so its factorisations run on two threads up to ``PARALLEL_MAX`` rows in
+    all (above, two factorisations' work space at once would lift the peak memory of a 1M-triangle
+    disk from 1.9 GB to 2.3 GB; docs/scale.md); CHOLMOD's binding holds the GIL (two threads measured
+    no faster), so its factorisations run in turn."""
+    orders = list(orders) if orders is not None else [None] * len(matrices)
+    if len(orders) != len(matrices):
+        raise ConformalError(f"{len(orders)} orders for {len(matrices)} matrices")
+    methods = [_method(K.shape[0], o) for K, o in zip(matrices, orders)]
+    if WORKERS < 2 or len(matrices) < 2 or 'cholmod' in methods or \
+            sum(K.shape[0] for K in matrices) > PARALLEL_MAX:
+        return [Factor(K, order=o) for K, o in zip(matrices, orders)]
     with ThreadPoolExecutor(min(WORKERS, len(matrices))) as ex:
-        return list(ex.map(Factor, matrices))
+        return list(ex.map(lambda ko: Factor(ko[0], order=ko[1]), zip(matrices, orders)))
+
+
+def _method(size, order):
+    """The backend ``Factor`` chooses for a matrix of ``size`` rows with ``order`` (or None):
+    SuperLU in a given order unless CHOLMOD is forced."""
+    if order is not None and os.environ.get('CONFORMAL_SOLVER', '').strip().lower() != 'cholmod':
+        return 'superlu'
+    return backend(size)
+
+
+def fill_order(points, K, min_size=None, leaf=ND_LEAF):
+    """Nested dissection order (k,) int64 of the symmetric sparse matrix ``K`` (k,k) whose row i
+    belongs to the point ``points[i]`` (k,d), for factoring ``K[order][:, order]``; None below
+    ``min_size`` rows (default ``ND_MIN``; the solver's own ordering is as good there).
+
+    Each part (at first all rows) is split at the median of its longest bounding-box axis; the rows of
+    the second half with a neighbour (a nonzero of K) in the first half form the separator, which
+    takes the part's last positions; both halves are split again until at most ``leaf`` rows are
+    left, which keep their sorted order. All parts of one level are split at once (vectorised), so
+    the cost is O(k log k) numpy work over about log2(k / leaf) levels."""
+    k = K.shape[0]
+    if k < (ND_MIN if min_size is None else min_size):
+        return None
+    X = np.asarray(points, np.float64).reshape(k, -1)
+    C = sp.triu(sp.coo_matrix(K), 1).tocoo()
+    ei, ej = C.row.astype(np.int64), C.col.astype(np.int64)
+    pos = np.empty(k, np.int64)              # output position of each row
+    work = np.arange(k)                      # rows of the open parts, grouped by part
+    part = np.zeros(k, np.int64)             # part of each entry of work (non-decreasing)
+    lo_pos, size = np.zeros(1, np.int64), np.array([k])     # output range of each open part
+    part_of = np.empty(k, np.int64)
+    second = np.empty(k, bool)
+    sep = np.zeros(k, bool)
+    while len(work):
+        first = np.zeros(len(size), np.int64)
+        np.cumsum(size[:-1], out=first[1:])
+        rank = np.arange(len(work)) - first[part]
+        small = (size <= leaf)[part]
+        if small.any():                      # leaves: keep the current order in their range
+            pos[work[small]] = lo_pos[part[small]] + rank[small]
+        big = size > leaf
+        if not big.any():
+            break
+        renum = np.cumsum(big) - 1
+        work, part = work[~small], renum[part[~small]]
+        lo_pos, size = lo_pos[big], size[big]
+        first = np.zeros(len(size), np.int64)
+        np.cumsum(size[:-1], out=first[1:])
+        P = X[work]
+        lo = np.minimum.reduceat(P, first, axis=0)
+        ext = np.maximum.reduceat(P, first, axis=0) - lo
+        axis = np.argmax(ext, axis=1)
+        a = axis[part]
+        span = ext[np.arange(len(size)), axis] * (1 + 1e-9) + 1e-300
+        key = part + (P[np.arange(len(work)), a] - lo[part, a]) / span[part]      # in [part, part+1)
+        o = np.argsort(key, kind='stable')
+        work = work[o]
+        rank = np.arange(len(work)) - first[part]
+        side = rank >= (size // 2)[part]     # the second half of each part
+        part_of[work], second[work] = part, side
+        same = (part_of[ei] == part_of[ej]) & (part_of[ei] >= 0)
+        ei, ej = ei[same], ej[same]          # edges between parts never matter again
+        cut = second[ei] != second[ej]
+        sep[np.where(second[ei[cut]], ei[cut], ej[cut])] = True
+        is_sep = sep[work]
+        n_sep = np.bincount(part, is_sep, minlength=len(size)).astype(np.int64)
+        n_first = np.bincount(part, ~side, minlength=len(size)).astype(np.int64)
+        if is_sep.any():                     # separators: the last positions of their part's range
+            sp_part = part[is_sep]
+            start = np.searchsorted(sp_part, np.arange(len(size)))
+            pos[work[is_sep]] = (lo_pos + size - n_sep)[sp_part] + np.arange(len(sp_part)) - start[sp_part]
+        alive = ~sep[ei] & ~sep[ej]
+        ei, ej = ei[alive], ej[alive]
+        keep = ~is_sep
+        work, part = work[keep], 2 * part[keep] + side[keep]      # still grouped: first half first
+        lo_pos = np.stack([lo_pos, lo_pos + n_first], 1).ravel()
+        size = np.stack([n_first, size - n_first - n_sep], 1).ravel()
+        nonempty = size > 0
+        part = (np.cumsum(nonempty) - 1)[part]
+        lo_pos, size = lo_pos[nonempty], size[nonempty]
+        part_of[:] = -1
+    order = np.empty(k, np.int64)
+    order[pos] = np.arange(k)
+    return order
+
+
+def sub_order(order, rows):
+    """The order (r,) of the submatrix ``K[rows][:, rows]`` that ``order`` (k,) of ``K`` induces
+    (``rows`` increasing indices or a (k,) bool mask); None if ``order`` is None."""
+    if order is None:
+        return None
+    rows = np.flatnonzero(rows) if np.asarray(rows).dtype == bool else np.asarray(rows, np.int64)
+    at = np.full(len(order), -1, np.int64)
+    at[rows] = np.arange(len(rows))
+    sub = at[order]
+    return sub[sub >= 0]
 
 
 def _is_symmetric(K):
@@ -105,13 +220,20 @@ class Factor:
 
     ``solve(b)`` takes (k,) or (k,r) right-hand sides and returns float64 of the same shape.
     ``backend`` is the backend that ran ('cholmod' or 'superlu'); ``method`` (optional) forces one,
-    otherwise ``backend(k)`` chooses.
+    otherwise ``backend(k)`` chooses, or SuperLU when ``order`` is given. ``order`` (k,) optional:
+    a fill-reducing permutation of the rows (``fill_order``) in which SuperLU factors ``K``
+    (CHOLMOD orders by itself); ``ordering`` says which ordering ran ('given', 'mmd' or 'cholmod').
     Raises ``ConformalError`` ('degenerate') if ``K`` is singular."""
 
-    def __init__(self, K, method=None):
+    def __init__(self, K, method=None, order=None):
         K = sp.csc_matrix(K, dtype=np.float64)
         self.shape = K.shape
-        method = method or backend(K.shape[0])
+        self._order = None
+        if order is not None:
+            order = np.asarray(order, np.int64)
+            if order.shape != (K.shape[0],):
+                raise ConformalError(f"the order has {order.size} entries, the matrix {K.shape[0]} rows")
+        method = method or _method(K.shape[0], order)
         if method not in BACKENDS:
             raise ConformalError(f"unknown solver backend {method!r}: use one of {', '.join(BACKENDS)}")
         if method == 'cholmod' and _cholespy is None:
@@ -120,8 +242,12 @@ class Factor:
         if method == 'cholmod' and K.shape[0] > 0 and _is_symmetric(K):
             self._chol = self._cholmod(K)
         if self._chol is None:
-            self._lu = self._superlu(K)
+            if order is not None:
+                self._order = order
+                K = K[order][:, order].tocsc()
+            self._lu = self._superlu(K, 'NATURAL' if order is not None else 'MMD_AT_PLUS_A')
         self.backend = 'cholmod' if self._chol is not None else 'superlu'
+        self.ordering = 'cholmod' if self._chol is not None else ('given' if order is not None else 'mmd')
 
     @staticmethod
     def _cholmod(K):
@@ -139,9 +265,9 @@ class Factor:
                 return None
 
     @staticmethod
-    def _superlu(K):
+    def _superlu(K, permc_spec):
         try:
-            return spla.splu(K, permc_spec='MMD_AT_PLUS_A', diag_pivot_thresh=0.0,
+            return spla.splu(K, permc_spec=permc_spec, diag_pivot_thresh=0.0,
                              options=dict(SymmetricMode=True))
         except RuntimeError as exc:
             raise ConformalError(f"the Laplacian is singular ({exc}): the mesh has degenerate "
@@ -162,14 +288,28 @@ class Factor:
             return np.zeros(b.shape)
         if self._chol is not None:
             x = self._solve_cholmod(b)
-        elif b.ndim == 2 and b.shape[1] >= SPLIT_RHS and WORKERS > 1:
-            # SuperLU releases the GIL: split many right-hand sides over the cores
-            parts = np.array_split(np.arange(b.shape[1]), WORKERS)
-            with ThreadPoolExecutor(WORKERS) as ex:
-                cols = list(ex.map(lambda p: self._lu.solve(np.ascontiguousarray(b[:, p])), parts))
-            x = np.concatenate(cols, axis=1)
         else:
-            x = self._lu.solve(b)
+            rows = slice(None) if self._order is None else self._order
+            x = np.empty(b.shape)
+            if b.ndim == 1:
+                x[rows] = self._lu.solve(b[rows])
+            else:
+                # columns in blocks of at most BLOCK_BYTES, each permuted, solved and put in its place
+                # on its own (the peak memory of many right-hand sides stays near the output's); SuperLU
+                # releases the GIL, so with SPLIT_RHS or more columns the blocks go to two threads
+                r = b.shape[1]
+                w = max(1, min(r, BLOCK_BYTES // (8 * max(1, b.shape[0]))))
+                if r >= SPLIT_RHS and WORKERS > 1:
+                    w = min(w, -(-r // WORKERS))
+
+                def block(c0):
+                    x[rows, c0:c0 + w] = self._lu.solve(b[rows, c0:c0 + w])
+                if r >= SPLIT_RHS and WORKERS > 1:
+                    with ThreadPoolExecutor(WORKERS) as ex:
+                        list(ex.map(block, range(0, r, w)))
+                else:
+                    for c0 in range(0, r, w):
+                        block(c0)
         if not np.all(np.isfinite(x)):
             raise ConformalError("the linear solve produced NaN: the mesh is numerically degenerate "
                                  "(needle or zero-area triangles)", 'degenerate', 'clean_mesh')
