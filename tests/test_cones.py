@@ -157,8 +157,10 @@ def test_rigid_motion_scale_and_vertex_order_invariance():
     Q, _ = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))
     Q *= np.sign(np.linalg.det(Q))                              # a rotation
     b = cone_unwrap(1e3 * V @ Q.T + 5.0, F, max_cones=8, target_ratio=None)
-    assert np.array_equal(a.cones, b.cones)
-    assert np.allclose(a.kappa, b.kappa, atol=1e-9)
+    # the same cones with the same angles (their order may differ: near-ties of the greedy)
+    oa, ob = np.argsort(a.cones), np.argsort(b.cones)
+    assert np.array_equal(a.cones[oa], b.cones[ob])
+    assert np.allclose(a.kappa[oa], b.kappa[ob], atol=1e-8)
     # the grid-like cube has equally short cut paths: round-off may pick another one of them
     for key in ('mu_ratio', 'mu_ratio_p1_p99', 'qc_mean', 'seam_fraction'):
         assert abs(a.report[key] - b.report[key]) < 2e-3, key

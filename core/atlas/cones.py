@@ -39,6 +39,9 @@ from scipy.optimize import linprog
 from ..errors import ConformalError
 from ..mesh import topology
 from ..mesh.geometry import angle_sums, face_areas
+from ..mesh.intrinsic import corner_angles as corner_angles_l
+from ..mesh.intrinsic import corner_cotangents as corner_cotangents_l
+from ..mesh.intrinsic import intrinsic_delaunay, layout
 from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, singular_values
 from ..mesh.solve import Factor
@@ -86,10 +89,18 @@ class ConeSystem:
     areas, ``chi``, ``u0`` (n,) the solution without cones, ``eligible`` (n,) bool vertices that may
     become cones (interior vertices)."""
 
-    def __init__(self, V, F, ground=0):
+    def __init__(self, V, F, ground=0, intrinsic=True):
         self.V, self.F = V, F
         n = self.n = len(V)
-        self.L = cotan_laplacian(V, F)
+        self.intrinsic = None
+        if intrinsic:
+            # the intrinsic Delaunay Laplacian (nonnegative interior weights: no spikes of u next to
+            # needle triangles); Omega does not change under intrinsic flips (docs/robustness.md)
+            T = intrinsic_delaunay(V, F, mollify_delta=0.0)
+            self.L = T.cotan_laplacian().tocsr()
+            self.intrinsic = T
+        else:
+            self.L = cotan_laplacian(V, F)
         self.A = face_areas(V, F)
         loops = topology.boundary_loops(F, n)
         self.loops = loops
@@ -327,15 +338,147 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None)
 # ------------------------------------------------------------------------------------------------
 # layout of the cut disk
 # ------------------------------------------------------------------------------------------------
-def _boundary_data(Vc, Fc, loop, uc):
+def _boundary_data(Vc, Fc, loop, uc, vert_of=None, Lu=None, cache=None):
     """Turning angles ``k~`` (nb,) and target lengths ``l~`` (nb,) of the cut disk's boundary ``loop``
-    (edge j from loop[j] to loop[j+1]) for the log scale ``uc`` (N,) on the split vertices."""
-    L = cotan_laplacian(Vc, Fc)
+    (edge j from loop[j] to loop[j+1]) for the log scale ``uc`` (N,) on the split vertices.
+
+    ``k~ = k + (L u)_B`` with the cut disk's own cotan ``L`` (``_disk_laplacian``). ``Lu`` (n,): the
+    closed surface's ``L u`` from the operator ``u`` was solved with (the intrinsic Delaunay
+    Laplacian), with ``vert_of`` (N,) the input vertex of each split vertex: the difference to the
+    cut disk's split is shared equally by the copies of each vertex, so that the copies' turning angles sum to
+    ``Omega + (L u)`` of the closed operator (the cone curvature; 0 on a seam between cones) and the
+    two sides of a seam stay congruent."""
+    L = _disk_laplacian(Vc, Fc, cache)
     s = angle_sums(Vc, Fc)
-    kt = np.pi - s[loop] + (L @ uc)[loop]
+    Luc = L @ uc
+    if Lu is not None:
+        n = len(Lu)
+        copies = np.bincount(vert_of, minlength=n)
+        resid = Lu - np.bincount(vert_of, Luc, minlength=n)
+        Luc = Luc + (resid / np.maximum(copies, 1))[vert_of]
+    kt = np.pi - s[loop] + Luc[loop]
     l = np.linalg.norm(Vc[np.roll(loop, -1)] - Vc[loop], axis=1)
     lt = np.exp(0.5 * (uc[loop] + uc[np.roll(loop, -1)])) * l
     return kt, lt, L
+
+
+def _disk_laplacian(Vc, Fc, cache=None):
+    """The cut disk's Laplacian (N,N), for its boundary data and for the UVs' harmonic extension:
+    the intrinsic Delaunay cotan Laplacian of the cut disk (its boundary, i.e. the cut, is never
+    flipped), which has no negative interior weights, so the extension keeps the maximum principle
+    next to needle triangles (docs/robustness.md). Kept in ``cache`` for the same cut disk."""
+    key = (len(Vc), hash(Fc.tobytes()))
+    if cache is not None and cache.get('disk_key') == key:
+        return cache['disk']
+    T = intrinsic_delaunay(Vc, Fc, mollify_delta=0.0)
+    L = T.cotan_laplacian().tocsr() if T.report['flips'] else cotan_laplacian(Vc, Fc)
+    if cache is not None:
+        cache['disk_key'], cache['disk'], cache['disk_T'] = key, L, T
+    return L
+
+
+def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-10):
+    """Exact flat cone metric by Newton's method on the discrete conformal (Yamabe) equation
+    (docs/cones.md, "Exact layout").
+
+    ``T``: the cut disk's intrinsic triangulation (``IntrinsicTriangulation`` on N split vertices);
+    ``vert_of`` (N,) the surface vertex of each split vertex; ``n`` surface vertices. The unknown is
+    one log scale ``u`` (n,) per surface vertex (the same on every copy, so the two sides of a seam
+    keep equal lengths); the lengths are ``l~_e = exp((u_a + u_b)/2) l_e``. ``target`` (n,) the
+    angle sums wanted (radians: ``2*pi - kappa``); ``fixed`` (n,) bool vertices whose ``u`` stays at
+    ``u0`` (n,) (a ground vertex, or the surface's boundary). Newton step: ``L(u) du = s(u) - target``
+    (``s`` the angle sums, ``L(u)`` the cotan Laplacian of the current lengths, the Hessian of the
+    convex discrete conformal energy), with backtracking that keeps every triangle valid and lowers
+    the residual. A triangle whose lengths break the triangle inequality counts with the angles
+    (pi, 0, 0) (the energy's convex extension; it lays out flat). Returns (u (n,), edge lengths (E,),
+    count of such flat triangles) or None when it does not converge."""
+    import scipy.sparse as sp
+    a0, a1 = vert_of[T.edge_vertices()].T
+    Fo = vert_of[T.F]
+    free = np.nonzero(~fixed)[0]
+    nxt, prv = np.array([1, 2, 0]), np.array([2, 0, 1])
+
+    def state(u):
+        el = T.edge_lengths * np.exp(0.5 * (u[a0] + u[a1]))
+        l = el[T.FE]
+        valid = (l.sum(1, keepdims=True) - 2 * l > 0).all(1)
+        # an invalid triangle has the angles (pi, 0, 0) (the convex extension of the energy)
+        r = np.bincount(Fo.ravel(), corner_angles_l(l).ravel(), minlength=n) - target
+        r[fixed] = 0.0
+        return el, l, r, valid
+
+    u = np.array(u0, np.float64)
+    st = state(u)
+    for _ in range(max_iter):
+        el, l, r, valid = st
+        if float(np.abs(r).max()) < tol:
+            break
+        with np.errstate(divide='ignore', invalid='ignore'):
+            w = 0.5 * corner_cotangents_l(l)
+        w[~valid] = 0.0
+        i, j = Fo[:, nxt].ravel(), Fo[:, prv].ravel()
+        w = w.ravel()
+        H = sp.csc_matrix((np.r_[-w, -w, w, w], (np.r_[i, j, i, j], np.r_[j, i, i, j])), shape=(n, n))
+        try:
+            du = Factor(H[free][:, free].tocsc()).solve(r[free])
+        except (ConformalError, RuntimeError, ValueError):
+            return None
+        if not np.isfinite(du).all():
+            return None
+        t, norm = 1.0, float(np.linalg.norm(r))
+        while t > 1e-3:
+            u2 = u.copy()
+            u2[free] += t * du
+            st2 = state(u2)
+            if np.linalg.norm(st2[2]) < (1 - 1e-4 * t) * norm:
+                break
+            t *= 0.5
+        else:
+            break                                  # no progress: converged to round-off or stuck
+        u, st = u2, st2
+    ok = float(np.abs(st[2]).max()) < 1e3 * tol
+    return (u, st[0], int((~st[3]).sum())) if ok else None
+
+
+def unfold(T, el):
+    """Lay out the triangles of a flat disk ``T`` (``IntrinsicTriangulation``) with edge lengths
+    ``el`` (E,) in the plane, face by face across interior edges (breadth first, one array step per
+    ring of faces). Returns positions (N,2), counter-clockwise like the faces; units of ``el``."""
+    F, FE, EF, EC = T.F, T.FE, T.EF, T.EC
+    m, N = len(F), T.n
+    Z = layout(el[FE]) @ np.array([1.0, 1j])                    # (m,3) complex local copies
+    pos = np.full(N, np.nan + 0j)
+    placed = np.zeros(m, bool)
+    pos[F[0]] = Z[0]
+    placed[0] = True
+    front = np.array([0])
+    nxt, prv = np.array([1, 2, 0]), np.array([2, 0, 1])
+    while len(front):
+        e = FE[front].ravel()
+        f0 = np.repeat(front, 3)
+        side = (EF[e, 0] == f0).astype(np.int64)                # the other side of each edge
+        f2, c = EF[e, side], EC[e, side]
+        ok = f2 >= 0
+        f2, c = f2[ok], c[ok]
+        ok = ~placed[f2]
+        f2, c = f2[ok], c[ok]
+        f2, first = np.unique(f2, return_index=True)
+        c = c[first]
+        if not len(f2):
+            break
+        i, j, k = F[f2, nxt[c]], F[f2, prv[c]], F[f2, c]
+        zi, zj, zk = Z[f2, nxt[c]], Z[f2, prv[c]], Z[f2, c]
+        rot = (pos[j] - pos[i]) / (zj - zi)
+        rot /= np.abs(rot)
+        newk = np.isnan(pos[k])
+        kk, first = np.unique(k[newk], return_index=True)
+        pos[kk] = (pos[i] + rot * (zk - zi))[newk][first]
+        placed[f2] = True
+        front = f2
+    return np.stack([pos.real, pos.imag], axis=1)
+
+
+
 
 
 def paired_polygon(kt, lt, pair):
@@ -390,13 +533,12 @@ def _harmonic(L, loop, PB, cache=None):
     X[loop] = PB
     if len(I):
         LI = L[I]
-        key = (N, loop.tobytes())
-        fac = cache.get(key) if cache is not None else None
+        key = (N, loop.tobytes(), id(L))
+        fac = cache['fac'] if cache is not None and cache.get('fac_key') == key else None
         if fac is None:
             fac = Factor(LI[:, I])
             if cache is not None:
-                cache.clear()
-                cache[key] = fac
+                cache['fac_key'], cache['fac'] = key, fac
         X[I] = -fac.solve(LI[:, loop] @ PB)
     return X
 
@@ -422,13 +564,14 @@ def _wedge_middle(Vc, Fc, loop, corner):
     return min(inner)[1] if inner else None
 
 
-def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None):
+def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=None, exact=True):
     """Cut ``(V, F)`` along ``seams`` (k,2) and lay the disk out with the closed-surface log scale
     ``u`` (n,). A cone whose wedge exceeds ``WEDGE_MAX`` (a negative cone at a leaf of the cut) gets
     the twig of a positive leaf cone rerouted through it (at most ``max_branches`` times).
     Returns (cut (``islands.Cut``), loop (nb,), uv (N,2) per split vertex, seams (k',2), info dict)."""
     n = len(V)
     seams = np.asarray(seams, np.int64).reshape(-1, 2)
+    cache = {} if cache is None else cache
     added = 0
     while True:
         cut = cut_along_seams(F, n, seams)
@@ -437,7 +580,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None):
             raise ConformalError("the cut graph does not open the surface into a disk", 'bad_topology')
         loop = topology.boundary_loops(Fc, len(vert_of))[0]
         Vc, uc = V[vert_of], u[vert_of]
-        kt, lt, Lc = _boundary_data(Vc, Fc, loop, uc)
+        kt, lt, Lc = _boundary_data(Vc, Fc, loop, uc, vert_of, Lu, cache)
         wedge = np.pi - kt
         bad = np.nonzero(wedge > WEDGE_MAX)[0]
         if len(bad) == 0 or added >= max_branches:
@@ -463,6 +606,25 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None):
     a, b = vert_of[loop], vert_of[np.roll(loop, -1)]
     key = np.minimum(a, b) * n + np.maximum(a, b)
     _, pair = np.unique(key, return_inverse=True)
+    info = {'repair_rounds': 0, 'branches_added': added, 'max_wedge': float(wedge.max()),
+            'pair': pair.ravel(), 'exact': False}
+    if exact:
+        # the exact flat cone metric on the cut disk's intrinsic triangulation, unfolded
+        kap_all = np.zeros(n)
+        kap_all[np.asarray(cones, np.int64)] = kappa
+        fixed = np.zeros(n, bool)
+        bl = topology.boundary_loops(F, n)
+        for lp in bl:
+            fixed[lp] = True
+        if not bl:
+            fixed[int(np.argmin(np.abs(u)))] = True
+        got = flat_cone_metric(cache['disk_T'], vert_of, n, 2 * np.pi - kap_all, fixed, np.zeros(n))
+        if got is not None:
+            uv = unfold(cache['disk_T'], got[1])
+            if np.isfinite(uv).all():
+                info['exact'] = True
+                info['flat_triangles'] = got[2]
+                return cut, loop, uv, seams, info
     P = paired_polygon(kt, lt, pair.ravel())
     uv = _harmonic(Lc, loop, P, cache)
     repaired = 0
@@ -478,8 +640,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None):
             mark |= adj @ mark.astype(np.int8) > 0
         uv = _harmonic(clamped_laplacian(Lc, mark), loop, P)
         repaired += 1
-    info = {'repair_rounds': repaired, 'branches_added': added, 'max_wedge': float(wedge.max()),
-            'pair': pair.ravel()}
+    info['repair_rounds'] = repaired
     return cut, loop, uv, seams, info
 
 
@@ -493,7 +654,8 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None):
     u = system.u_of(S, kappa)
     u -= np.median(u)
     cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa, cache=cache,
-                                             max_branches=16 if len(Vw) <= BIG_MESH else 4)
+                                             max_branches=16 if len(Vw) <= BIG_MESH else 4,
+                                             Lu=system.L @ u)
     Fc = cut.F
     W = uvc[Fc]
     e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
@@ -622,7 +784,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         me = ev['measured']
         tried.append({'angles': label, 'flips': me['flips'], 'overlaps': ev['crossings'],
                       'degenerate': me['degenerate'], 'mu_ratio_p1_p99': me['mu_ratio_p1_p99'],
-                      'qc_mean': me['qc_mean']})
+                      'qc_mean': me['qc_mean'], 'exact': ev['info']['exact']})
         defects = me['flips'] + ev['crossings'] + me['degenerate']
         key = (defects == 0, -defects, me['mu_ratio_p1_p99'])
         if best is None or key > best[0]:
@@ -651,7 +813,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         'overlaps': int(crossings),
         'seam_edges': int(len(seams)), 'seam_length': seam_len * unit, 'seam_fraction': seam_len / total_len,
         'branches_added': linfo['branches_added'], 'max_wedge': linfo['max_wedge'],
-        'repair_rounds': linfo['repair_rounds'],
+        'repair_rounds': linfo['repair_rounds'], 'exact_layout': linfo['exact'],
         'vertex_ratio': float(np.exp(u.min() - u.max())),
         'vertex_ratio_outside_rings': float(np.exp(u[rows].min() - u[rows].max())),
         'estimated_p1_p99': face_spread(Fw, system.A, u),
