@@ -46,7 +46,7 @@ from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, singular_values
 from ..mesh.solve import Factor
 from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_arrays, check_mesh, normalise_scale
-from .cutgraph import cut_graph, is_disk, reroute_leaf, straighten
+from .cutgraph import cut_graph, is_disk, reroute_leaf, straighten, through_corner
 from .islands import boundary_crossings, cut_along_seams
 
 KAPPA_MAX = 3.5                    # a cone keeps an angle of at least 2*pi - 3.5 (LP bound)
@@ -58,6 +58,7 @@ DEGENERATE_QC = 1e3                # a layout triangle with s1/s2 above this cou
 REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
 QC_WARN = 1.1                      # the layout's qc_mean above this is reported (both UV coordinates
                                    # are harmonic, so the cut disk is not exactly conformal)
+L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (placement)
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 
 
@@ -160,6 +161,44 @@ class ConeSystem:
             return np.linalg.lstsq(M, rhs, rcond=None)[0][:k]
         return np.linalg.lstsq(G, -self.u0[S], rcond=None)[0]
 
+    def l2_angles(self, S, lower=None, upper=None):
+        """Cone curvatures kappa (k,) minimising the area-weighted spread ``sum_i a_i (u_i - c)^2``
+        of the log scale over all vertices (``a_i`` a third of the incident triangles' area, ``c``
+        free), subject to the sum rule on a closed surface and ``lower <= kappa <= upper``
+        (default ``L2_BOUNDS``): a bounded least-squares problem in k+1 unknowns built from the
+        cones' Green's columns. Cheap, and on spot, rocker-arm and cheburashka a better start for the
+        per-triangle 1%/99% spread than BFF's rule or the L-inf angles (docs/cones.md)."""
+        from scipy.optimize import lsq_linear
+        S = np.asarray(S, np.int64)
+        k = len(S)
+        if k == 0:
+            return np.zeros(0)
+        lo = L2_BOUNDS[0] if lower is None else lower
+        hi = L2_BOUNDS[1] if upper is None else upper
+        w = self.vertex_area / self.vertex_area.sum()
+        A = np.c_[self.columns(S), -np.ones(self.n)]            # u - c = u0 + A [kappa; c]
+        M = A.T @ (w[:, None] * A)
+        g = A.T @ (w * self.u0)
+        # ||W^1/2 (u0 + A x)||^2 = ||R x + R^-T g||^2 + const with M = R^T R (eigen square root:
+        # M is only semidefinite without cones that move u)
+        ev, Q = np.linalg.eigh(M)
+        ev = np.maximum(ev, 1e-14 * max(ev.max(), 1e-300))
+        R = (Q * np.sqrt(ev)).T
+        b = -(Q.T @ g) / np.sqrt(ev)
+        if self.needs_sum:
+            big = 1e3 * np.sqrt(ev.max())
+            R = np.r_[R, big * np.r_[np.ones(k), 0.0][None]]
+            b = np.r_[b, big * self.total]
+        bl = np.r_[np.full(k, lo), -np.inf]
+        bu = np.r_[np.full(k, hi), np.inf]
+        if self.needs_sum and k * hi < self.total:
+            bu[:k] = self.total / k + 1e-9
+        x = lsq_linear(R, b, bounds=(bl, bu), method='bvls').x
+        kap = x[:k]
+        if self.needs_sum:
+            kap = kap + (self.total - kap.sum()) / k                # the sum rule to round-off
+        return kap
+
     def rings(self, S, depth=1):
         """(n,) bool: the vertices within ``depth`` edges of the cones ``S``."""
         mark = np.zeros(self.n, bool)
@@ -261,49 +300,85 @@ def face_spread(F, A, u, q=1.0):
 
 
 def _score(system, S):
-    """(spread, kappa): the 1%/99% spread of the per-triangle scale with BFF's angles on cones ``S``."""
-    kap = system.dirichlet_angles(S)
+    """(spread, kappa): the 1%/99% spread of the per-triangle scale with the area-L2 angles
+    (``ConeSystem.l2_angles``) on cones ``S``."""
+    kap = system.l2_angles(S)
     return face_spread(system.F, system.A, system.u_of(S, kap)), kap
 
 
-def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None):
-    """Cone placement: greedy, then local moves, then L-inf angles (docs/cones.md, "Placement").
-
-    1. Greedy (BFF's rule): the next cone goes to the vertex of largest ``|u - u_cone|`` outside the
-       cones' one-rings, where ``u`` has the cones at one common value (``dirichlet_angles``); one
-       Green's column per cone. It stops when the area-weighted 1%/99% spread of the scale
-       (``face_spread``) reaches ``target_ratio`` (None: never) or at ``max_cones``.
-    2. ``sweeps`` passes of local moves: each cone tries the vertices of its one-ring and moves where
-       the spread improves (with the angles re-solved).
-    3. The angles are re-solved for the L-inf objective (``ConeSystem.linf_angles``); they are kept
-       if they improve the spread.
-    ``system``: ``ConeSystem``. Returns (cones (c,), kappa (c,), history list of (count, spread))."""
-    report = progress or (lambda f, msg: None)
+def _greedy(system, target_ratio, max_cones, candidates, report):
+    """Greedy cone placement. ``candidates`` > 0: the look-ahead rule (the ``candidates`` most extreme
+    vertices of ``u``, half at each end, are scored by ``_score`` and the best is kept); 0: BFF's rule
+    (the vertex of largest ``|u - u_cone|`` with BFF's angles, u equal at the cones). Returns (cones
+    list, history list of (count, spread))."""
     S = []
+    w = system.vertex_area / system.vertex_area.sum()
     if system.needs_sum:
-        va = system.vertex_area / system.vertex_area.sum()
-        u = system.solve(system.total * va - system.Omega)
+        u = system.solve(system.total * w - system.Omega)
     else:
         u = system.u0.copy()
     history = [(0, face_spread(system.F, system.A, u))]
-    kap = np.zeros(0)
+    best = history[-1][1]
     min_cones = 3 if system.needs_sum and system.chi > 0 else 0
+    half = max(1, candidates // 2)
     while len(S) < max_cones:
-        if target_ratio is not None and history[-1][1] >= target_ratio and len(S) >= min_cones:
+        if target_ratio is not None and best >= target_ratio and len(S) >= min_cones:
             break
-        report(0.7 * len(S) / max(1, max_cones), f"placing cone {len(S) + 1}")
-        ref = u[S[0]] if S else np.median(u[system.eligible]) if system.eligible.any() else 0.0
-        dev = np.abs(u - ref)
-        dev[~system.eligible] = -1
+        report(0.35 * len(S) / max(1, max_cones), f"placing cone {len(S) + 1}")
+        ok = system.eligible.copy()
         if S:
-            dev[system.rings(S, 1)] = -1
-        v = int(np.argmax(dev))
-        if dev[v] < 0:
+            ok &= ~system.rings(S, 1)
+        idx = np.nonzero(ok)[0]
+        if not len(idx):
             break
-        S.append(v)
-        kap = system.dirichlet_angles(S)
+        if candidates:
+            order = idx[np.argsort(u[idx] - (w * u).sum())]
+            cand = np.unique(np.r_[order[:half], order[-half:]])
+            system.columns(cand)
+            trial = None
+            for v in cand.tolist():
+                sc, kk = _score(system, S + [v])
+                if trial is None or sc > trial[0]:
+                    trial = (sc, v, kk)
+            best, v, kap = trial
+            S.append(v)
+        else:
+            ref = u[S[0]] if S else np.median(u[system.eligible])
+            S.append(int(idx[np.argmax(np.abs(u[idx] - ref))]))
+            kap = system.dirichlet_angles(S)
+            best = face_spread(system.F, system.A, system.u_of(S, kap))
         u = system.u_of(S, kap)
-        history.append((len(S), face_spread(system.F, system.A, u)))
+        history.append((len(S), best))
+    return S, history
+
+
+def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None, candidates=None):
+    """Cone placement: two greedy runs, the better one refined by local moves (docs/cones.md,
+    "Placement").
+
+    1. Greedy with a look-ahead: ``candidates`` vertices are tried for the next cone, the most
+       extreme of ``u`` at each end (half the highest, half the lowest, outside the cones'
+       one-rings); each is scored by the area-weighted 1%/99% spread of the per-triangle scale
+       (``face_spread``) with the angles re-solved (``l2_angles``), and the best is kept. One Green's
+       column per candidate (cached). And BFF's greedy (the vertex of largest ``|u - u_cone|``; it
+       finds the exact corners of a cube). Each stops when the spread reaches ``target_ratio`` (None:
+       never) or at ``max_cones``; the run that reaches the target with fewer cones, else the better
+       spread (``_score``), is kept.
+    2. ``sweeps`` passes of local moves: each cone tries the vertices of its one-ring and moves where
+       the spread improves (angles re-solved).
+    ``system``: ``ConeSystem``. ``candidates``: per greedy step (default 12; on meshes over
+    ``BIG_MESH`` vertices only BFF's greedy runs). Returns (cones (c,), kappa (c,), history list of
+    (count, spread))."""
+    report = progress or (lambda f, msg: None)
+    if candidates is None:
+        candidates = 12 if system.n <= BIG_MESH else 0
+    runs = []
+    for c in sorted({candidates, 0}, reverse=True):
+        S, hist = _greedy(system, target_ratio, max_cones, c, report)
+        sc = _score(system, S)[0] if S else hist[-1][1]
+        hit = target_ratio is not None and sc >= target_ratio
+        runs.append(((hit, -len(S) if hit else 0, sc), S, hist))
+    _, S, history = max(runs, key=lambda r: r[0])
     if not S:
         return np.zeros(0, np.int64), np.zeros(0), history
     best, kap = _score(system, S)
@@ -317,22 +392,15 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None)
             nb = adj[S[i]].indices
             nb = nb[system.eligible[nb] & ~blocked[nb]]
             system.columns(nb)
-            for w in nb.tolist():
-                T = S[:i] + [w] + S[i + 1:]
+            for v in nb.tolist():
+                T = S[:i] + [v] + S[i + 1:]
                 sc, kk = _score(system, T)
                 if sc > best + 1e-9:
                     best, kap, S, moved = sc, kk, T, True
         history.append((len(S), best))
         if not moved:
             break
-    report(0.9, "solving the cone angles")
-    S = np.array(S, np.int64)
-    k_inf, sp_inf = system.trimmed_angles(S, rounds=3 if system.n <= BIG_MESH else 1)
-    if k_inf is not None:
-        if sp_inf > best:
-            kap, best = k_inf, sp_inf
-            history.append((len(S), best))
-    return S, np.asarray(kap, np.float64), history
+    return np.array(S, np.int64), np.asarray(kap, np.float64), history
 
 
 # ------------------------------------------------------------------------------------------------
@@ -598,7 +666,13 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
             stop[lp] = True
         protect = np.zeros(n, bool)
         protect[np.asarray(cones, np.int64)[np.asarray(kappa) < 0]] = True
-        new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect)
+        new = through_corner(V, F, seams, c, int(vert_of[w0]), stop, protect)
+        if new is not None:
+            c2 = cut_along_seams(F, n, new)
+            if c2.n_islands != 1 or not is_disk(c2.F, len(c2.vert_of)):
+                new = None
+        if new is None:
+            new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect)
         if new is None:
             break
         seams = straighten(F, new, stop)
@@ -761,6 +835,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
             return
         # the cut is fixed by the cones; a leaf of it is one wedge, so its kappa must be positive
         leaf = deg[S] <= 1
+        if leaf.any():
+            yield 'l2, leaves >= 0.4', system.l2_angles(S, lower=np.where(leaf, KAPPA_LEAF, L2_BOUNDS[0]))
         for floor in ANGLE_FLOORS:
             k2, _ = system.trimmed_angles(S, lower=np.where(leaf, KAPPA_LEAF, max(floor, KAPPA_MIN)),
                                           rounds=3 if n <= BIG_MESH else 1)
