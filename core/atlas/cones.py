@@ -59,6 +59,8 @@ REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded 
 QC_WARN = 1.1                      # the layout's qc_mean above this is reported (both UV coordinates
                                    # are harmonic, so the cut disk is not exactly conformal)
 L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (placement)
+CORRECTIONS = 2                    # fixed-point steps of the angles for the exact metric's log scale
+MAX_SPLITS = 6                     # an overlapping layout is split into at most MAX_SPLITS + 1 charts
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 
 
@@ -161,11 +163,12 @@ class ConeSystem:
             return np.linalg.lstsq(M, rhs, rcond=None)[0][:k]
         return np.linalg.lstsq(G, -self.u0[S], rcond=None)[0]
 
-    def l2_angles(self, S, lower=None, upper=None):
+    def l2_angles(self, S, lower=None, upper=None, shift=None):
         """Cone curvatures kappa (k,) minimising the area-weighted spread ``sum_i a_i (u_i - c)^2``
         of the log scale over all vertices (``a_i`` a third of the incident triangles' area, ``c``
         free), subject to the sum rule on a closed surface and ``lower <= kappa <= upper``
-        (default ``L2_BOUNDS``): a bounded least-squares problem in k+1 unknowns built from the
+        (default ``L2_BOUNDS``); ``shift`` (n,) optional, added to ``u`` (the exact metric's correction,
+        see ``cone_unwrap``): a bounded least-squares problem in k+1 unknowns built from the
         cones' Green's columns. Cheap, and on spot, rocker-arm and cheburashka a better start for the
         per-triangle 1%/99% spread than BFF's rule or the L-inf angles (docs/cones.md)."""
         from scipy.optimize import lsq_linear
@@ -178,7 +181,7 @@ class ConeSystem:
         w = self.vertex_area / self.vertex_area.sum()
         A = np.c_[self.columns(S), -np.ones(self.n)]            # u - c = u0 + A [kappa; c]
         M = A.T @ (w[:, None] * A)
-        g = A.T @ (w * self.u0)
+        g = A.T @ (w * (self.u0 if shift is None else self.u0 + shift))
         # ||W^1/2 (u0 + A x)||^2 = ||R x + R^-T g||^2 + const with M = R^T R (eigen square root:
         # M is only semidefinite without cones that move u)
         ev, Q = np.linalg.eigh(M)
@@ -297,6 +300,14 @@ def face_spread(F, A, u, q=1.0):
     lo = uf[order[np.searchsorted(c, q / 100)]]
     hi = uf[order[min(np.searchsorted(c, 1 - q / 100), len(c) - 1)]]
     return float(np.exp(lo - hi))
+
+
+def weighted_spread(x, w, q=1.0):
+    """Area-weighted ``q``% / ``(100-q)``% percentile ratio of positive per-triangle values ``x`` (m,)
+    with weights ``w`` (m,) (e.g. the realised scale ``mu`` and the 3D areas): the acceptance measure
+    'p1/p99' of docs/cones.md. NaN entries are ignored."""
+    ok = np.isfinite(x) & (x > 0)
+    return face_spread(np.arange(ok.sum())[:, None], w[ok], np.log(x[ok]), q)
 
 
 def _score(system, S):
@@ -698,6 +709,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
             if np.isfinite(uv).all():
                 info['exact'] = True
                 info['flat_triangles'] = got[2]
+                info['u_exact'] = got[0]
                 return cut, loop, uv, seams, info
     P = paired_polygon(kt, lt, pair.ravel())
     uv = _harmonic(Lc, loop, P, cache)
@@ -721,7 +733,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
 # ------------------------------------------------------------------------------------------------
 # the public entry point
 # ------------------------------------------------------------------------------------------------
-def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None):
+def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
     """Lay out and measure one set of cone angles on the cut ``seams``: dict with cut, loop, uv (N,2)
     per split vertex (UV area = 3D area), seams, info, measured (``measures_from_jacobians``),
     crossings (boundary self-crossings) and u (n,)."""
@@ -730,6 +742,11 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None):
     cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa, cache=cache,
                                              max_branches=16 if len(Vw) <= BIG_MESH else 4,
                                              Lu=system.L @ u)
+    crossings = boundary_crossings(uvc, [loop])
+    splits = 0
+    if crossings and split:
+        cut, uvc, seams, crossings, splits = split_overlaps(Vw, Fw, cut, uvc, seams)
+    info['charts'], info['splits'] = int(cut.n_islands), splits
     Fc = cut.F
     W = uvc[Fc]
     e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
@@ -739,12 +756,116 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None):
                              "degenerate", 'degenerate', 'clean_mesh')
     uvc = (uvc - uvc.mean(0)) * np.sqrt(system.A.sum() / a_uv)
     J, A = jacobians(Vw[cut.vert_of], Fc, uvc)
-    measured, _ = measures_from_jacobians(J, A)
+    measured, mu = measures_from_jacobians(J, A)
+    measured['mu_ratio_p1_p99_area'] = weighted_spread(mu, A)
     sv = singular_values(J)
     # a triangle squashed to (nearly) nothing is as unusable as a flipped one
     measured['degenerate'] = int((sv[:, 1] <= DEGENERATE_QC ** -1 * sv[:, 0]).sum())
     return {'cut': cut, 'loop': loop, 'uv': uvc, 'seams': seams, 'info': info, 'measured': measured,
-            'crossings': boundary_crossings(uvc, [loop]), 'u': u}
+            'crossings': crossings, 'u': u}
+
+
+def _piece_crossings(Fc, uvc, face_island, n_islands, segments=False):
+    """Boundary self-crossings of every piece (island) of a cut layout: list of (count, segments
+    (k,2) of split-vertex pairs, boundary loops) per piece."""
+    out = []
+    for i in range(n_islands):
+        Fi = Fc[face_island == i]
+        loops = topology.boundary_loops(Fi, len(uvc))
+        cnt, seg = boundary_crossings(uvc, loops, return_segments=True)
+        out.append((cnt, seg, loops))
+    return out
+
+
+def _crossing_pairs(uv, seg):
+    """Pairs of the segments ``seg`` (k,2) (vertex pairs, positions ``uv``) that cross each other."""
+    P, Q = uv[seg[:, 0]], uv[seg[:, 1]]
+
+    def orient(p, q, r):
+        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1])
+                       - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+    a, b = np.triu_indices(len(seg), 1)
+    x = (orient(P[a], Q[a], P[b]) * orient(P[a], Q[a], Q[b]) < 0) & \
+        (orient(P[b], Q[b], P[a]) * orient(P[b], Q[b], Q[a]) < 0)
+    return [(seg[i], seg[j]) for i, j in zip(a[x], b[x])]
+
+
+def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
+    """Split an overlapping layout into charts (docs/cones.md, "Charts"). The layout of the cut disk
+    is one flat metric, so any piece of it is laid out by the same coordinates: a piece whose boundary
+    crosses itself is cut in two along the shortest interior path between the middles of the two
+    boundary arcs that the first crossing pair separates, which puts the two crossing segments into
+    different pieces; repeated up to ``max_splits`` times. The pieces are then moved apart (shelf
+    packing). ``V`` (n,3), ``F`` (m,3) the working mesh; ``cut`` (``islands.Cut``) and ``uvc`` (N,2)
+    its cut disk and layout; ``seams`` (k,2). Returns (cut, uvc, seams, crossings left, splits)."""
+    from scipy.sparse.csgraph import dijkstra
+    n = len(V)
+    splits = 0
+    while True:
+        pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands)
+        bad = [i for i, (c, _, _) in enumerate(pieces) if c]
+        if not bad or splits >= max_splits:
+            break
+        added = None
+        for i in bad:
+            cnt, seg, loops = pieces[i]
+            if len(loops) != 1:
+                continue
+            lp = loops[0]
+            pos = -np.ones(len(uvc), np.int64)
+            pos[lp] = np.arange(len(lp))
+            for s1, s2 in _crossing_pairs(uvc, seg):
+                a, b = int(pos[s1[0]]), int(pos[s2[0]])
+                if a < 0 or b < 0:
+                    continue
+                nl = len(lp)
+                p = int(lp[(a + ((b - a) % nl) // 2) % nl])
+                q = int(lp[(b + ((a - b) % nl) // 2) % nl])
+                Fi = cut.F[cut.face_island == i]
+                E, _ = topology.unique_edges(Fi)
+                onb = np.zeros(len(uvc), bool)
+                onb[lp] = True
+                ok = ~((onb[E[:, 0]] & (E[:, 0] != p) & (E[:, 0] != q))
+                       | (onb[E[:, 1]] & (E[:, 1] != p) & (E[:, 1] != q)))
+                ok &= ~(onb[E[:, 0]] & onb[E[:, 1]])
+                E = E[ok]
+                w = np.maximum(np.linalg.norm(V[cut.vert_of[E[:, 0]]] - V[cut.vert_of[E[:, 1]]], axis=1),
+                               1e-300)
+                import scipy.sparse as sp
+                G = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
+                                  shape=(len(uvc), len(uvc))).tocsr()
+                dist, pred = dijkstra(G, directed=False, indices=p, return_predecessors=True)
+                if not np.isfinite(dist[q]):
+                    continue
+                path = [q]
+                while path[-1] != p:
+                    path.append(int(pred[path[-1]]))
+                pv = cut.vert_of[np.array(path)]
+                added = np.sort(np.stack([pv[:-1], pv[1:]], axis=1), axis=1)
+                break
+            if added is not None:
+                break
+        if added is None:
+            break
+        seams = np.unique(np.r_[seams, added], axis=0)
+        new = cut_along_seams(F, n, seams)
+        uv2 = np.zeros((len(new.vert_of), 2))
+        uv2[new.F.ravel()] = uvc[cut.F.ravel()]
+        cut, uvc = new, uv2
+        splits += 1
+    left = sum(c for c, _, _ in _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands))
+    if cut.n_islands > 1:
+        # move the pieces apart
+        from .islands import shelf_pack
+        lo = np.full((cut.n_islands, 2), np.inf)
+        hi = np.full((cut.n_islands, 2), -np.inf)
+        vi = cut.vert_island
+        np.minimum.at(lo, vi, uvc)
+        np.maximum.at(hi, vi, uvc)
+        size = hi - lo
+        off, _ = shelf_pack(size, 0.02 * np.sqrt((size[:, 0] * size[:, 1]).sum()))
+        uvc = uvc - lo[vi] + off[vi]
+    return cut, uvc, seams, int(left), splits
 
 
 def _split_nonmanifold(V, F):
@@ -849,7 +970,19 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     best = None
     tried = []
     cache = {}
-    for label, kap in cands:
+    def corrected():
+        """Angle sets that account for the exact metric: the realised log scale differs from the
+        linear one by ``d = u_exact - u_linear``, nearly independent of small angle changes; the area-L2
+        angles are re-solved for ``u_linear + d`` (a fixed-point step), from the best layout so far."""
+        for it in range(CORRECTIONS if n <= BIG_MESH and not given and len(S) else 0):
+            if best is None or 'u_exact' not in best[3]['info']:
+                return
+            ue = best[3]['info']['u_exact']
+            d = ue - system.u_of(S, best[2])
+            yield f'l2, exact-metric correction {it + 1}', system.l2_angles(S, shift=d - np.median(d))
+
+    import itertools
+    for label, kap in itertools.chain(cands, corrected()):
         if best is not None and best[0][0] and n > BIG_MESH:
             break                                   # big mesh: the first valid layout is kept
         try:
@@ -860,9 +993,11 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         me = ev['measured']
         tried.append({'angles': label, 'flips': me['flips'], 'overlaps': ev['crossings'],
                       'degenerate': me['degenerate'], 'mu_ratio_p1_p99': me['mu_ratio_p1_p99'],
-                      'qc_mean': me['qc_mean'], 'exact': ev['info']['exact']})
+                      'mu_ratio_p1_p99_area': me['mu_ratio_p1_p99_area'],
+                      'qc_mean': me['qc_mean'], 'exact': ev['info']['exact'],
+                      'charts': ev['info']['charts']})
         defects = me['flips'] + ev['crossings'] + me['degenerate']
-        key = (defects == 0, -defects, me['mu_ratio_p1_p99'])
+        key = (defects == 0, -defects, me['mu_ratio_p1_p99_area'])
         if best is None or key > best[0]:
             best = (key, label, kap, ev)
     if best is None:
@@ -890,6 +1025,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         'seam_edges': int(len(seams)), 'seam_length': seam_len * unit, 'seam_fraction': seam_len / total_len,
         'branches_added': linfo['branches_added'], 'max_wedge': linfo['max_wedge'],
         'repair_rounds': linfo['repair_rounds'], 'exact_layout': linfo['exact'],
+        'charts': linfo['charts'], 'chart_splits': linfo['splits'],
         'vertex_ratio': float(np.exp(u.min() - u.max())),
         'vertex_ratio_outside_rings': float(np.exp(u[rows].min() - u[rows].max())),
         'estimated_p1_p99': face_spread(Fw, system.A, u),
@@ -906,9 +1042,9 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                         f"(s1/s2 > {DEGENERATE_QC:g})")
     if crossings:
         warnings.append(f"the layout overlaps itself ({crossings} boundary crossing(s))")
-    if target_ratio is not None and cones is None and measured['mu_ratio_p1_p99'] < target_ratio:
-        warnings.append(f"the 1%/99% scale ratio {measured['mu_ratio_p1_p99']:.3f} is below the target "
-                        f"{target_ratio} with {len(S)} cones (max_cones={max_cones})")
+    if target_ratio is not None and cones is None and measured['mu_ratio_p1_p99_area'] < target_ratio:
+        warnings.append(f"the area-weighted 1%/99% scale ratio {measured['mu_ratio_p1_p99_area']:.3f} "
+                        f"is below the target {target_ratio} with {len(S)} cones (max_cones={max_cones})")
     if measured['qc_mean'] > QC_WARN:
         warnings.append(f"the map is not conformal enough: qc_mean {measured['qc_mean']:.3f}")
     rep['warnings'] = warnings
