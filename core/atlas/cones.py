@@ -644,14 +644,29 @@ def _wedge_middle(Vc, Fc, loop, corner):
 
 
 def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=None, exact=True):
-    """Cut ``(V, F)`` along ``seams`` (k,2) and lay the disk out with the closed-surface log scale
-    ``u`` (n,). A cone whose wedge exceeds ``WEDGE_MAX`` (a negative cone at a leaf of the cut) gets
-    the twig of a positive leaf cone rerouted through it (at most ``max_branches`` times).
+    """Cut ``(V, F)`` along ``seams`` (k,2) and lay the disk out for the cone curvatures ``kappa`` (c,)
+    at ``cones`` (c,), with the closed-surface linear log scale ``u`` (n,) (``Lu``: its ``L u``).
+
+    ``exact``: the exact flat cone metric (``flat_cone_metric``) unfolded (``unfold``); if Newton
+    fails, the BFF-style layout of the linear ``u`` (a paired boundary polygon extended
+    harmonically). A cone whose wedge exceeds ``WEDGE_MAX`` (a negative cone at a leaf of the cut, or
+    one split unevenly; the exact metric's wedge when there is one, else the linear estimate) gets a
+    new branch of the cut through the middle of that wedge (``through_corner``, else
+    ``reroute_leaf``), at most ``max_branches`` times.
     Returns (cut (``islands.Cut``), loop (nb,), uv (N,2) per split vertex, seams (k',2), info dict)."""
     n = len(V)
     seams = np.asarray(seams, np.int64).reshape(-1, 2)
     cache = {} if cache is None else cache
     added = 0
+    failed = set()
+    kap_all = np.zeros(n)
+    kap_all[np.asarray(cones, np.int64)] = kappa
+    fixed = np.zeros(n, bool)
+    bl = topology.boundary_loops(F, n)
+    for lp in bl:
+        fixed[lp] = True
+    if not bl:
+        fixed[int(np.argmin(np.abs(u)))] = True
     while True:
         cut = cut_along_seams(F, n, seams)
         Fc, vert_of = cut.F, cut.vert_of
@@ -661,19 +676,27 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         Vc, uc = V[vert_of], u[vert_of]
         kt, lt, Lc = _boundary_data(Vc, Fc, loop, uc, vert_of, Lu, cache)
         wedge = np.pi - kt
-        bad = np.nonzero(wedge > WEDGE_MAX)[0]
+        got = None
+        if exact:
+            T = cache['disk_T']
+            got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, np.zeros(n))
+            if got is not None:
+                ang = corner_angles_l(got[1][T.FE])
+                wedge = np.bincount(T.F.ravel(), ang.ravel(), minlength=len(vert_of))[loop]
+        bad = np.nonzero((wedge > WEDGE_MAX) & ~np.isin(vert_of[loop], list(failed)))[0]
         if len(bad) == 0 or added >= max_branches:
             break
         cc = int(loop[bad[np.argmax(wedge[bad])]])
         c = int(vert_of[cc])
         w0 = _wedge_middle(Vc, Fc, loop, cc)
         if w0 is None:
-            break
+            failed.add(c)
+            continue
         deg = np.bincount(seams.ravel(), minlength=n)
         pos = np.asarray(cones)[(np.asarray(kappa) > 0) & (deg[np.asarray(cones, np.int64)] == 1)]
         stop = np.zeros(n, bool)
         stop[np.asarray(cones, np.int64)] = True
-        for lp in topology.boundary_loops(F, n):
+        for lp in bl:
             stop[lp] = True
         protect = np.zeros(n, bool)
         protect[np.asarray(cones, np.int64)[np.asarray(kappa) < 0]] = True
@@ -685,7 +708,8 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         if new is None:
             new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect)
         if new is None:
-            break
+            failed.add(c)                    # try the next corner; this one keeps its wedge
+            continue
         seams = straighten(F, new, stop)
         added += 1
     a, b = vert_of[loop], vert_of[np.roll(loop, -1)]
@@ -693,24 +717,13 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
     _, pair = np.unique(key, return_inverse=True)
     info = {'repair_rounds': 0, 'branches_added': added, 'max_wedge': float(wedge.max()),
             'pair': pair.ravel(), 'exact': False}
-    if exact:
-        # the exact flat cone metric on the cut disk's intrinsic triangulation, unfolded
-        kap_all = np.zeros(n)
-        kap_all[np.asarray(cones, np.int64)] = kappa
-        fixed = np.zeros(n, bool)
-        bl = topology.boundary_loops(F, n)
-        for lp in bl:
-            fixed[lp] = True
-        if not bl:
-            fixed[int(np.argmin(np.abs(u)))] = True
-        got = flat_cone_metric(cache['disk_T'], vert_of, n, 2 * np.pi - kap_all, fixed, np.zeros(n))
-        if got is not None:
-            uv = unfold(cache['disk_T'], got[1])
-            if np.isfinite(uv).all():
-                info['exact'] = True
-                info['flat_triangles'] = got[2]
-                info['u_exact'] = got[0]
-                return cut, loop, uv, seams, info
+    if got is not None:
+        uv = unfold(cache['disk_T'], got[1])
+        if np.isfinite(uv).all():
+            info['exact'] = True
+            info['flat_triangles'] = got[2]
+            info['u_exact'] = got[0]
+            return cut, loop, uv, seams, info
     P = paired_polygon(kt, lt, pair.ravel())
     uv = _harmonic(Lc, loop, P, cache)
     repaired = 0

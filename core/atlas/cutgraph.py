@@ -310,7 +310,8 @@ def through_corner(V, F, edges, corner, start, stop, protect=None):
     single wedge exceeds 2*pi) by a new branch, keeping a tree of the same topology.
 
     The branch leaves ``corner`` by ``start`` (its neighbour in the middle of the wedge) and follows
-    the shortest path off the cut to the nearest cut vertex ``x`` that is not on ``corner``'s own twig.
+    the shortest path off the cut to the nearest cut vertex ``x`` that is not on one of ``corner``'s
+    own branches (up to the next stop or branch point).
     That closes one cycle (the branch plus the cut's path from ``x`` back to ``corner``); the cycle
     is opened again by removing its longest segment between two ``stop`` vertices ((n,) bool: cones,
     boundary) or branch points, except the segments that end at ``corner`` and those ending at a
@@ -324,8 +325,19 @@ def through_corner(V, F, edges, corner, start, stop, protect=None):
     on_cut[edges.ravel()] = True
     if on_cut[start]:
         return None
-    own = np.zeros(n, bool)
-    own[twig(edges, int(corner), stop)] = True             # corner's own twig (and corner)
+    own = np.zeros(n, bool)                                # corner and its branches up to the
+    own[corner] = True                                     # next cone, boundary or branch point
+    deg = np.bincount(edges.ravel(), minlength=n)
+    for e in edges[(edges == corner).any(1)]:
+        prev, v = int(corner), int(e[0] if e[1] == corner else e[1])
+        while True:
+            own[v] = True
+            if stop[v] or deg[v] != 2:
+                break
+            nxt = [int(x) for x in edges[(edges == v).any(1)].ravel() if x != v and x != prev]
+            if not nxt:
+                break
+            prev, v = v, nxt[0]
     # off-cut vertices, plus steps onto allowed cut vertices (which end a path: they are sinks)
     ok = ~(own[E[:, 0]] | own[E[:, 1]]) & ~(on_cut[E[:, 0]] & on_cut[E[:, 1]])
     dist, pred = dijkstra(_weighted(E[ok], w[ok], n), directed=False, indices=int(start),
