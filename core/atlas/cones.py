@@ -59,6 +59,7 @@ REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded 
 QC_WARN = 1.1                      # the layout's qc_mean above this is reported (both UV coordinates
                                    # are harmonic, so the cut disk is not exactly conformal)
 L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (placement)
+REFACTOR = 0.5                     # Newton: factor the Hessian again when |r| fell by less than this
 CORRECTIONS = 2                    # fixed-point steps of the angles for the exact metric's log scale
 MAX_SPLITS = 6                     # an overlapping layout is split into at most MAX_SPLITS + 1 charts
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
@@ -456,7 +457,7 @@ def _disk_laplacian(Vc, Fc, cache=None):
     return L
 
 
-def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-10):
+def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-10, fac0=None):
     """Exact flat cone metric by Newton's method on the discrete conformal (Yamabe) equation
     (docs/cones.md, "Exact layout").
 
@@ -467,9 +468,12 @@ def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-10):
     angle sums wanted (radians: ``2*pi - kappa``); ``fixed`` (n,) bool vertices whose ``u`` stays at
     ``u0`` (n,) (a ground vertex, or the surface's boundary). Newton step: ``L(u) du = s(u) - target``
     (``s`` the angle sums, ``L(u)`` the cotan Laplacian of the current lengths, the Hessian of the
-    convex discrete conformal energy), with backtracking that keeps every triangle valid and lowers
-    the residual. A triangle whose lengths break the triangle inequality counts with the angles
-    (pi, 0, 0) (the energy's convex extension; it lays out flat). Returns (u (n,), edge lengths (E,),
+    convex discrete conformal energy), with backtracking that lowers the residual; the Hessian is
+    factored again only when the residual stops falling fast (chord steps in between). ``fac0``: an
+    optional first factorisation of a nearby Hessian on the same free vertices (the closed surface's
+    Laplacian of ``ConeSystem``), which saves the first factorisation. A triangle whose lengths
+    break the triangle inequality counts with the angles (pi, 0, 0) (the energy's convex extension;
+    it lays out flat). Returns (u (n,), edge lengths (E,),
     count of such flat triangles) or None when it does not converge."""
     import scipy.sparse as sp
     a0, a1 = vert_of[T.edge_vertices()].T
@@ -488,23 +492,32 @@ def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-10):
 
     u = np.array(u0, np.float64)
     st = state(u)
+    fac, fresh, last = fac0, False, np.inf
     for _ in range(max_iter):
         el, l, r, valid = st
+        norm = float(np.linalg.norm(r))
         if float(np.abs(r).max()) < tol:
             break
-        with np.errstate(divide='ignore', invalid='ignore'):
-            w = 0.5 * corner_cotangents_l(l)
-        w[~valid] = 0.0
-        i, j = Fo[:, nxt].ravel(), Fo[:, prv].ravel()
-        w = w.ravel()
-        H = sp.csc_matrix((np.r_[-w, -w, w, w], (np.r_[i, j, i, j], np.r_[j, i, i, j])), shape=(n, n))
-        try:
-            du = Factor(H[free][:, free].tocsc()).solve(r[free])
-        except (ConformalError, RuntimeError, ValueError):
-            return None
+        # the Hessian is factored again only when the residual stops falling fast (a chord step
+        # with the previous factorisation costs one solve; a factorisation of a 100k mesh ~1 s)
+        if fac is None or norm > REFACTOR * last:
+            with np.errstate(divide='ignore', invalid='ignore'):
+                w = 0.5 * corner_cotangents_l(l)
+            w[~valid] = 0.0
+            i, j = Fo[:, nxt].ravel(), Fo[:, prv].ravel()
+            w = w.ravel()
+            H = sp.csc_matrix((np.r_[-w, -w, w, w], (np.r_[i, j, i, j], np.r_[j, i, i, j])), shape=(n, n))
+            try:
+                fac, fresh = Factor(H[free][:, free].tocsc()), True
+            except (ConformalError, RuntimeError, ValueError):
+                return None
+        else:
+            fresh = False
+        last = norm
+        du = fac.solve(r[free])
         if not np.isfinite(du).all():
             return None
-        t, norm = 1.0, float(np.linalg.norm(r))
+        t = 1.0
         while t > 1e-3:
             u2 = u.copy()
             u2[free] += t * du
@@ -513,7 +526,10 @@ def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-10):
                 break
             t *= 0.5
         else:
-            break                                  # no progress: converged to round-off or stuck
+            if fresh:
+                break                              # no progress: converged to round-off or stuck
+            fac, last = None, np.inf               # a stale Hessian: factor again
+            continue
         u, st = u2, st2
     ok = float(np.abs(st[2]).max()) < 1e3 * tol
     return (u, st[0], int((~st[3]).sum())) if ok else None
@@ -622,6 +638,41 @@ def _harmonic(L, loop, PB, cache=None):
     return X
 
 
+def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS):
+    """Local repair of an exact layout ``uv`` (N,2), in place: the input triangles are laid out with
+    straight edges between the vertices of the intrinsic triangulation, so a needle triangle can come
+    out flipped or flat. The vertices within ``1 + round`` rings of such triangles (not on the cut
+    disk's boundary ``loop``, so seam copies stay congruent) are re-placed by the harmonic map with
+    nonnegative weights (``clamped_laplacian`` of ``Lc``, a convex combination of the neighbours).
+    Returns the number of rounds used."""
+    N = len(uv)
+    onb = np.zeros(N, bool)
+    onb[loop] = True
+    adj = None
+    for r in range(rounds):
+        area = signed_uv_areas(uv, Fc)
+        bad = area <= 1e-14 * np.abs(area).sum()
+        if not bad.any():
+            return r
+        if adj is None:
+            adj = topology.vertex_adjacency(Fc, N)
+        mark = np.zeros(N, bool)
+        mark[Fc[bad].ravel()] = True
+        for _ in range(1 + r):
+            mark |= adj @ mark.astype(np.int8) > 0
+        mark &= ~onb
+        M = np.nonzero(mark)[0]
+        if not len(M):
+            return r
+        Lp = clamped_laplacian(Lc, np.ones(N, bool)).tocsr()
+        R = np.nonzero(~mark)[0]
+        try:
+            uv[M] = Factor(Lp[M][:, M].tocsc()).solve(-(Lp[M][:, R] @ uv[R]))
+        except (ConformalError, RuntimeError, ValueError):
+            return r
+    return rounds
+
+
 def _wedge_middle(Vc, Fc, loop, corner):
     """The neighbour of boundary vertex ``corner`` of the cut disk that halves its wedge by angle
     (walking the fan of triangles from the next boundary vertex to the previous one)."""
@@ -643,7 +694,8 @@ def _wedge_middle(Vc, Fc, loop, corner):
     return min(inner)[1] if inner else None
 
 
-def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=None, exact=True):
+def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=None, exact=True,
+               fac0=None):
     """Cut ``(V, F)`` along ``seams`` (k,2) and lay the disk out for the cone curvatures ``kappa`` (c,)
     at ``cones`` (c,), with the closed-surface linear log scale ``u`` (n,) (``Lu``: its ``L u``).
 
@@ -666,7 +718,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
     for lp in bl:
         fixed[lp] = True
     if not bl:
-        fixed[int(np.argmin(np.abs(u)))] = True
+        fixed[0] = True                      # the ground of ConeSystem, whose factor is ``fac0``
     while True:
         cut = cut_along_seams(F, n, seams)
         Fc, vert_of = cut.F, cut.vert_of
@@ -677,9 +729,13 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         kt, lt, Lc = _boundary_data(Vc, Fc, loop, uc, vert_of, Lu, cache)
         wedge = np.pi - kt
         got = None
-        if exact:
+        if exact and (n <= BIG_MESH or not (wedge > WEDGE_MAX).any() or added >= max_branches):
+            # (big meshes: the linear wedges steer the branches; one exact solve at the end)
             T = cache['disk_T']
-            got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, np.zeros(n))
+            got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, u - u[fixed].mean(),
+                                   fac0=fac0)
+            if got is None:
+                got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, np.zeros(n))
             if got is not None:
                 ang = corner_angles_l(got[1][T.FE])
                 wedge = np.bincount(T.F.ravel(), ang.ravel(), minlength=len(vert_of))[loop]
@@ -723,6 +779,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
             info['exact'] = True
             info['flat_triangles'] = got[2]
             info['u_exact'] = got[0]
+            info['repair_rounds'] = _relax_folds(Fc, loop, uv, Lc)
             return cut, loop, uv, seams, info
     P = paired_polygon(kt, lt, pair.ravel())
     uv = _harmonic(Lc, loop, P, cache)
@@ -754,7 +811,7 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
     u -= np.median(u)
     cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa, cache=cache,
                                              max_branches=16 if len(Vw) <= BIG_MESH else 4,
-                                             Lu=system.L @ u)
+                                             Lu=system.L @ u, fac0=system._fac)
     crossings = boundary_crossings(uvc, [loop])
     splits = 0
     if crossings and split:
