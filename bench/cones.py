@@ -110,7 +110,8 @@ def xatlas_row(V, F):
 
 
 def fmt(name, label, r, ref=None):
-    cells = [name, label, str(r['cones']), f"{r['seam_fraction']:.4f}", f"{r['mu_ratio']:.3f}",
+    cells = [name, label, str(r['cones']), str(r.get('charts', '-')), f"{r['seam_fraction']:.4f}",
+             f"{r['mu_ratio']:.3f}",
              f"{r.get('mu_ratio_p1_p99_area', float('nan')):.3f}", f"{r['mu_ratio_p1_p99']:.3f}",
              f"{r.get('estimated_p1_p99', float('nan')):.3f}",
              f"{r['qc_mean']:.3f}", str(r['flips']), str(r['overlaps']),
@@ -125,9 +126,9 @@ def row(res, t):
 
 
 def table(names, budgets, anchor, use_xatlas, auto=True):
-    print('| mesh | method | cones | seam | mu_ratio | p1/p99 (area) | p1/p99 (count) | p1/p99 of u '
+    print('| mesh | method | cones | charts | seam | mu_ratio | p1/p99 (area) | p1/p99 (count) | p1/p99 of u '
           '| qc_mean | flips | cross | s | MovingCones p1/p99 |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
     for name in names:
         got = load(name)
         if got is None:
@@ -159,9 +160,9 @@ def table(names, budgets, anchor, use_xatlas, auto=True):
 
 
 def big():
-    print('| mesh | triangles | cones | p1/p99 | mu_ratio | qc_mean | flips | cross | s (total) '
-          '| s by stage | peak RSS MB |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|')
+    print('| mesh | triangles | cones | charts | p1/p99 (area) | mu_ratio | qc_mean | flips | cross '
+          '| s (total) | s by stage | peak RSS MB |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|')
     cases = []
     got = load('spot')
     if got is not None:
@@ -177,7 +178,8 @@ def big():
         r = res.report
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         stages = ', '.join(f"{k} {v:.1f}" for k, v in r['seconds'].items() if k != 'total')
-        print(f"| {name} | {len(F)} | {r['cones']} | {r['mu_ratio_p1_p99']:.3f} | {r['mu_ratio']:.3f} | "
+        print(f"| {name} | {len(F)} | {r['cones']} | {r['charts']} | {r['mu_ratio_p1_p99_area']:.3f} | "
+              f"{r['mu_ratio']:.3f} | "
               f"{r['qc_mean']:.3f} | {r['flips']} | {r['overlaps']} | {dt:.1f} | {stages} | {peak:.0f} |",
               flush=True)
 

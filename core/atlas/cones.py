@@ -61,7 +61,7 @@ QC_WARN = 1.1                      # the layout's qc_mean above this is reported
 L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (placement)
 REFACTOR = 0.5                     # Newton: factor the Hessian again when |r| fell by less than this
 CORRECTIONS = 2                    # fixed-point steps of the angles for the exact metric's log scale
-MAX_SPLITS = 6                     # an overlapping layout is split into at most MAX_SPLITS + 1 charts
+MAX_SPLITS = 10                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 
 
@@ -847,6 +847,34 @@ def _piece_crossings(Fc, uvc, face_island, n_islands, segments=False):
     return out
 
 
+def _interior_path(V, vert_of, E, onb, p, q, N, lp=None):
+    """Shortest path (list of split vertices) from ``p`` to ``q`` over the edges ``E`` (k,2) with their
+    3D lengths, or None. Edges touching a boundary vertex (``onb`` (N,) bool) other than ``p`` and
+    ``q`` cost ten times their length (such a path splits a piece into more than two, which is
+    allowed), and the boundary edges of ``lp`` (the loop) are never used."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import dijkstra
+    if p == q:
+        return None
+    end = np.zeros(N, bool)
+    end[[p, q]] = True
+    if lp is not None:
+        a, b = lp, np.roll(lp, -1)
+        bkey = np.minimum(a, b) * N + np.maximum(a, b)
+        E = E[~np.isin(np.minimum(E[:, 0], E[:, 1]) * N + np.maximum(E[:, 0], E[:, 1]), bkey)]
+    w = np.maximum(np.linalg.norm(V[vert_of[E[:, 0]]] - V[vert_of[E[:, 1]]], axis=1), 1e-300)
+    touch = (onb[E[:, 0]] & ~end[E[:, 0]]) | (onb[E[:, 1]] & ~end[E[:, 1]])
+    w = np.where(touch, 10 * w, w)
+    G = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(N, N)).tocsr()
+    dist, pred = dijkstra(G, directed=False, indices=p, return_predecessors=True)
+    if not np.isfinite(dist[q]):
+        return None
+    path = [q]
+    while path[-1] != p:
+        path.append(int(pred[path[-1]]))
+    return path
+
+
 def _crossing_pairs(uv, seg):
     """Pairs of the segments ``seg`` (k,2) (vertex pairs, positions ``uv``) that cross each other."""
     P, Q = uv[seg[:, 0]], uv[seg[:, 1]]
@@ -868,7 +896,6 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
     different pieces; repeated up to ``max_splits`` times. The pieces are then moved apart (shelf
     packing). ``V`` (n,3), ``F`` (m,3) the working mesh; ``cut`` (``islands.Cut``) and ``uvc`` (N,2)
     its cut disk and layout; ``seams`` (k,2). Returns (cut, uvc, seams, crossings left, splits)."""
-    from scipy.sparse.csgraph import dijkstra
     n = len(V)
     splits = 0
     while True:
@@ -889,27 +916,20 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
                 if a < 0 or b < 0:
                     continue
                 nl = len(lp)
-                p = int(lp[(a + ((b - a) % nl) // 2) % nl])
-                q = int(lp[(b + ((a - b) % nl) // 2) % nl])
                 Fi = cut.F[cut.face_island == i]
-                E, _ = topology.unique_edges(Fi)
+                E0, _ = topology.unique_edges(Fi)
                 onb = np.zeros(len(uvc), bool)
                 onb[lp] = True
-                ok = ~((onb[E[:, 0]] & (E[:, 0] != p) & (E[:, 0] != q))
-                       | (onb[E[:, 1]] & (E[:, 1] != p) & (E[:, 1] != q)))
-                ok &= ~(onb[E[:, 0]] & onb[E[:, 1]])
-                E = E[ok]
-                w = np.maximum(np.linalg.norm(V[cut.vert_of[E[:, 0]]] - V[cut.vert_of[E[:, 1]]], axis=1),
-                               1e-300)
-                import scipy.sparse as sp
-                G = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
-                                  shape=(len(uvc), len(uvc))).tocsr()
-                dist, pred = dijkstra(G, directed=False, indices=p, return_predecessors=True)
-                if not np.isfinite(dist[q]):
+                path = None
+                arc1, arc2 = (b - a) % nl, (a - b) % nl
+                for f1, f2 in ((2, 2), (1, 2), (3, 2), (2, 1), (2, 3), (1, 1), (3, 3)):
+                    p = int(lp[(a + arc1 * f1 // 4) % nl])
+                    q = int(lp[(b + arc2 * f2 // 4) % nl])
+                    path = _interior_path(V, cut.vert_of, E0, onb, p, q, len(uvc), lp)
+                    if path is not None:
+                        break
+                if path is None:
                     continue
-                path = [q]
-                while path[-1] != p:
-                    path.append(int(pred[path[-1]]))
                 pv = cut.vert_of[np.array(path)]
                 added = np.sort(np.stack([pv[:-1], pv[1:]], axis=1), axis=1)
                 break
