@@ -1,13 +1,14 @@
 """Cones and seams for the L-inf objective (issue 13): the Pareto table and the anchors.
 
     .venv/bin/python bench/cones.py [--meshes spot cheburashka cow rocker-arm] [--budgets 4 8 12 16 24]
-                                    [--no-anchor] [--no-xatlas] [--big]
+                                    [--no-anchor] [--no-xatlas] [--no-auto] [--big]
 
 Rows per mesh: ``cone_unwrap`` with exactly N cones (``target_ratio=None, max_cones=N``) and 'auto'
 (``target_ratio=0.5``); the BFF-style greedy anchor (a cone at the vertex of largest |u| with u equal
 at the cones, re-solve, repeat: L2 flavour, no moves, BFF's angles) laid out by the same cut and
 layout; xatlas's charts (if the ``xatlas`` package is installed; benchmarks only). Every row is
-measured per triangle with core.mesh.measures: mu_ratio (min/max), p1/p99, qc_mean, flips; 'cross'
+measured per triangle with core.mesh.measures: mu_ratio (min/max), p1/p99 (area-weighted, the
+acceptance measure, and by count), the vertex-level p1/p99 of the cones' u, qc_mean, flips; 'cross'
 counts boundary self-crossings of the cut disk (0 with 0 flips: no overlap). 'seam' is the cut's
 length as a fraction of the total edge length. Published MovingCones p1/p99 (vertex level) for
 comparison: spot 16 cones 0.367, 41 cones 0.615; cheburashka 24 cones 0.383, 53 cones 0.604;
