@@ -12,22 +12,22 @@ columns of the cones are ever computed (one solve each with the one factorisatio
 
 Pipeline of ``cone_unwrap``:
 
-1. placement (``place_cones``): BFF's greedy rule (next cone at the vertex of largest ``|u - u_cone|``
-   with u equal at the cones), until the area-weighted 1%/99% spread of the scale reaches
-   ``target_ratio`` or ``max_cones``; local moves of each cone to its one-ring; L-inf angles (a small
-   linear program: ``max u - min u`` over the vertices outside the cones and the area tails, HiGHS,
-   rows added by an active set).
+1. placement (``place_cones``): a look-ahead greedy (the most extreme vertices of ``u`` tried, each
+   scored by the area-weighted 1%/99% spread of the per-triangle scale with bounded area-L2 angles,
+   ``ConeSystem.l2_angles``) and BFF's greedy; the better run, then local moves of each cone to its
+   one-ring. ``L`` is the intrinsic Delaunay Laplacian.
 2. cut graph (``core.atlas.cutgraph.cut_graph``): 2g homology loops plus a short tree through the
-   cones and the boundary, pruned and straightened. A leaf cone must have ``kappa > 0``; a negative
-   cone whose wedge still exceeds ``2*pi`` gets the twig of a positive leaf cone rerouted through it.
-3. layout of the cut disk, BFF-style, for several angle sets on the same cones (the placement's,
-   L-inf angles with floors, BFF's); the best realised p1/p99 without flips, squashed triangles or
-   boundary crossings is kept. The closed-surface ``u`` gives the boundary lengths
-   ``exp((u_i+u_j)/2) l_ij`` and turning angles ``k + (L u)_B``; the boundary polygon is closed with
-   the smallest weighted length change that is *the same on both copies of every seam edge*, so the
-   two sides of a seam stay congruent (a rotation by the cone holonomy and a translation); both UV
-   coordinates are harmonic extensions of that polygon, re-solved with clamped weights where
-   needle triangles make it fold.
+   cones and the boundary, pruned and straightened. A wedge over ``2*pi`` (a negative cone) gets a
+   new branch through its middle (``through_corner``).
+3. layout of the cut disk for several angle sets on the same cones (area-L2, L-inf with floors,
+   BFF's, corrections for the exact metric); the best realised area-weighted p1/p99 without flips,
+   squashed triangles or overlap is kept. The layout is the exact flat cone metric (Newton on the
+   discrete conformal equation on the cut disk's intrinsic Delaunay triangulation, one log scale per
+   surface vertex, so both sides of a seam have equal lengths and differ by a rigid motion) unfolded
+   in the plane; if Newton fails, BFF-style: the closed-surface ``u`` gives the boundary lengths
+   ``exp((u_i+u_j)/2) l_ij`` and turning angles ``k + (L u)_B``, the polygon is closed with a length
+   change shared by both copies of every seam edge, and extended harmonically. An overlapping layout
+   is split into charts (``split_overlaps``).
 4. measures per triangle (``core.mesh.measures``) and overlap (boundary self-crossings).
 """
 import time
@@ -56,8 +56,8 @@ ANGLE_FLOORS = (-2.0, -1.0, 0.1)   # lower bounds of the angle candidates laid o
 BIG_MESH = 20_000                  # above this many vertices: fewer candidates and no cone moves
 DEGENERATE_QC = 1e3                # a layout triangle with s1/s2 above this counts as degenerate
 REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
-QC_WARN = 1.1                      # the layout's qc_mean above this is reported (both UV coordinates
-                                   # are harmonic, so the cut disk is not exactly conformal)
+QC_WARN = 1.1                      # the layout's qc_mean above this is reported (the discrete
+                                   # conformal map of a coarse mesh with strong cones is not exact)
 L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (placement)
 REFACTOR = 0.5                     # Newton: factor the Hessian again when |r| fell by less than this
 CORRECTIONS = 2                    # fixed-point steps of the angles for the exact metric's log scale
