@@ -1,13 +1,14 @@
 """Cones and seams for the L-inf objective (issue 13): the Pareto table and the anchors.
 
     .venv/bin/python bench/cones.py [--meshes spot cheburashka cow rocker-arm] [--budgets 4 8 12 16 24]
-                                    [--no-anchor] [--no-xatlas] [--big]
+                                    [--no-anchor] [--no-xatlas] [--no-auto] [--big]
 
 Rows per mesh: ``cone_unwrap`` with exactly N cones (``target_ratio=None, max_cones=N``) and 'auto'
 (``target_ratio=0.5``); the BFF-style greedy anchor (a cone at the vertex of largest |u| with u equal
 at the cones, re-solve, repeat: L2 flavour, no moves, BFF's angles) laid out by the same cut and
 layout; xatlas's charts (if the ``xatlas`` package is installed; benchmarks only). Every row is
-measured per triangle with core.mesh.measures: mu_ratio (min/max), p1/p99, qc_mean, flips; 'cross'
+measured per triangle with core.mesh.measures: mu_ratio (min/max), p1/p99 (area-weighted, the
+acceptance measure, and by count), the vertex-level p1/p99 of the cones' u, qc_mean, flips; 'cross'
 counts boundary self-crossings of the cut disk (0 with 0 flips: no overlap). 'seam' is the cut's
 length as a fraction of the total edge length. Published MovingCones p1/p99 (vertex level) for
 comparison: spot 16 cones 0.367, 41 cones 0.615; cheburashka 24 cones 0.383, 53 cones 0.604;
@@ -110,8 +111,11 @@ def xatlas_row(V, F):
 
 
 def fmt(name, label, r, ref=None):
-    cells = [name, label, str(r['cones']), f"{r['seam_fraction']:.4f}", f"{r['mu_ratio']:.3f}",
-             f"{r['mu_ratio_p1_p99']:.3f}", f"{r['qc_mean']:.3f}", str(r['flips']), str(r['overlaps']),
+    cells = [name, label, str(r['cones']), str(r.get('charts', '-')), f"{r['seam_fraction']:.4f}",
+             f"{r['mu_ratio']:.3f}",
+             f"{r.get('mu_ratio_p1_p99_area', float('nan')):.3f}", f"{r['mu_ratio_p1_p99']:.3f}",
+             f"{r.get('estimated_p1_p99', float('nan')):.3f}",
+             f"{r['qc_mean']:.3f}", str(r['flips']), str(r['overlaps']),
              f"{r['time']:.1f}", '' if ref is None else f"{ref:.3f}"]
     return '| ' + ' | '.join(cells) + ' |'
 
@@ -122,17 +126,17 @@ def row(res, t):
     return r
 
 
-def table(names, budgets, anchor, use_xatlas):
-    print('| mesh | method | cones | seam | mu_ratio | p1/p99 | qc_mean | flips | cross | s '
-          '| MovingCones p1/p99 |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|')
+def table(names, budgets, anchor, use_xatlas, auto=True):
+    print('| mesh | method | cones | charts | seam | mu_ratio | p1/p99 (area) | p1/p99 (count) | p1/p99 of u '
+          '| qc_mean | flips | cross | s | MovingCones p1/p99 |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
     for name in names:
         got = load(name)
         if got is None:
             continue
         V, F = got
         ref = MOVING_CONES.get(name, {})
-        for N in list(budgets) + ['auto']:
+        for N in list(budgets) + (['auto'] if auto else []):
             t = time.perf_counter()
             if N == 'auto':
                 res = cone_unwrap(V, F, target_ratio=0.5)
@@ -157,9 +161,9 @@ def table(names, budgets, anchor, use_xatlas):
 
 
 def big():
-    print('| mesh | triangles | cones | p1/p99 | mu_ratio | qc_mean | flips | cross | s (total) '
-          '| s by stage | peak RSS MB |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|')
+    print('| mesh | triangles | cones | charts | p1/p99 (area) | mu_ratio | qc_mean | flips | cross '
+          '| s (total) | s by stage | peak RSS MB |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|')
     cases = []
     got = load('spot')
     if got is not None:
@@ -175,7 +179,8 @@ def big():
         r = res.report
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         stages = ', '.join(f"{k} {v:.1f}" for k, v in r['seconds'].items() if k != 'total')
-        print(f"| {name} | {len(F)} | {r['cones']} | {r['mu_ratio_p1_p99']:.3f} | {r['mu_ratio']:.3f} | "
+        print(f"| {name} | {len(F)} | {r['cones']} | {r['charts']} | {r['mu_ratio_p1_p99_area']:.3f} | "
+              f"{r['mu_ratio']:.3f} | "
               f"{r['qc_mean']:.3f} | {r['flips']} | {r['overlaps']} | {dt:.1f} | {stages} | {peak:.0f} |",
               flush=True)
 
@@ -186,12 +191,13 @@ def main():
     ap.add_argument('--budgets', nargs='+', type=int, default=[4, 8, 12, 16, 24])
     ap.add_argument('--no-anchor', action='store_true')
     ap.add_argument('--no-xatlas', action='store_true')
+    ap.add_argument('--no-auto', action='store_true', help="skip the 'auto' (target 0.5) rows")
     ap.add_argument('--big', action='store_true', help='only the 100k-triangle speed rows')
     a = ap.parse_args()
     if a.big:
         big()
     else:
-        table(a.meshes, a.budgets, not a.no_anchor, not a.no_xatlas)
+        table(a.meshes, a.budgets, not a.no_anchor, not a.no_xatlas, not a.no_auto)
 
 
 if __name__ == '__main__':

@@ -12,22 +12,22 @@ columns of the cones are ever computed (one solve each with the one factorisatio
 
 Pipeline of ``cone_unwrap``:
 
-1. placement (``place_cones``): BFF's greedy rule (next cone at the vertex of largest ``|u - u_cone|``
-   with u equal at the cones), until the area-weighted 1%/99% spread of the scale reaches
-   ``target_ratio`` or ``max_cones``; local moves of each cone to its one-ring; L-inf angles (a small
-   linear program: ``max u - min u`` over the vertices outside the cones and the area tails, HiGHS,
-   rows added by an active set).
+1. placement (``place_cones``): a look-ahead greedy (the most extreme vertices of ``u`` tried, each
+   scored by the area-weighted 1%/99% spread of the per-triangle scale with bounded area-L2 angles,
+   ``ConeSystem.l2_angles``) and BFF's greedy; the better run, then local moves of each cone to its
+   one-ring. ``L`` is the intrinsic Delaunay Laplacian.
 2. cut graph (``core.atlas.cutgraph.cut_graph``): 2g homology loops plus a short tree through the
-   cones and the boundary, pruned and straightened. A leaf cone must have ``kappa > 0``; a negative
-   cone whose wedge still exceeds ``2*pi`` gets the twig of a positive leaf cone rerouted through it.
-3. layout of the cut disk, BFF-style, for several angle sets on the same cones (the placement's,
-   L-inf angles with floors, BFF's); the best realised p1/p99 without flips, squashed triangles or
-   boundary crossings is kept. The closed-surface ``u`` gives the boundary lengths
-   ``exp((u_i+u_j)/2) l_ij`` and turning angles ``k + (L u)_B``; the boundary polygon is closed with
-   the smallest weighted length change that is *the same on both copies of every seam edge*, so the
-   two sides of a seam stay congruent (a rotation by the cone holonomy and a translation); both UV
-   coordinates are harmonic extensions of that polygon, re-solved with clamped weights where
-   needle triangles make it fold.
+   cones and the boundary, pruned and straightened. A wedge over ``2*pi`` (a negative cone) gets a
+   new branch through its middle (``through_corner``).
+3. layout of the cut disk for several angle sets on the same cones (area-L2, L-inf with floors,
+   BFF's, corrections for the exact metric); the best realised area-weighted p1/p99 without flips,
+   squashed triangles or overlap is kept. The layout is the exact flat cone metric (Newton on the
+   discrete conformal equation on the cut disk's intrinsic Delaunay triangulation, one log scale per
+   surface vertex, so both sides of a seam have equal lengths and differ by a rigid motion) unfolded
+   in the plane; if Newton fails, BFF-style: the closed-surface ``u`` gives the boundary lengths
+   ``exp((u_i+u_j)/2) l_ij`` and turning angles ``k + (L u)_B``, the polygon is closed with a length
+   change shared by both copies of every seam edge, and extended harmonically. An overlapping layout
+   is split into charts (``split_overlaps``).
 4. measures per triangle (``core.mesh.measures``) and overlap (boundary self-crossings).
 """
 import time
@@ -39,11 +39,14 @@ from scipy.optimize import linprog
 from ..errors import ConformalError
 from ..mesh import topology
 from ..mesh.geometry import angle_sums, face_areas
+from ..mesh.intrinsic import corner_angles as corner_angles_l
+from ..mesh.intrinsic import corner_cotangents as corner_cotangents_l
+from ..mesh.intrinsic import intrinsic_delaunay, layout
 from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, singular_values
 from ..mesh.solve import Factor
 from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_arrays, check_mesh, normalise_scale
-from .cutgraph import cut_graph, is_disk, reroute_leaf, straighten
+from .cutgraph import cut_graph, is_disk, reroute_leaf, straighten, through_corner
 from .islands import boundary_crossings, cut_along_seams
 
 KAPPA_MAX = 3.5                    # a cone keeps an angle of at least 2*pi - 3.5 (LP bound)
@@ -53,8 +56,12 @@ ANGLE_FLOORS = (-2.0, -1.0, 0.1)   # lower bounds of the angle candidates laid o
 BIG_MESH = 20_000                  # above this many vertices: fewer candidates and no cone moves
 DEGENERATE_QC = 1e3                # a layout triangle with s1/s2 above this counts as degenerate
 REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
-QC_WARN = 1.1                      # the layout's qc_mean above this is reported (both UV coordinates
-                                   # are harmonic, so the cut disk is not exactly conformal)
+QC_WARN = 1.1                      # the layout's qc_mean above this is reported (the discrete
+                                   # conformal map of a coarse mesh with strong cones is not exact)
+L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (placement)
+REFACTOR = 0.5                     # Newton: factor the Hessian again when |r| fell by less than this
+CORRECTIONS = 2                    # fixed-point steps of the angles for the exact metric's log scale
+MAX_SPLITS = 10                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 
 
@@ -86,10 +93,18 @@ class ConeSystem:
     areas, ``chi``, ``u0`` (n,) the solution without cones, ``eligible`` (n,) bool vertices that may
     become cones (interior vertices)."""
 
-    def __init__(self, V, F, ground=0):
+    def __init__(self, V, F, ground=0, intrinsic=True):
         self.V, self.F = V, F
         n = self.n = len(V)
-        self.L = cotan_laplacian(V, F)
+        self.intrinsic = None
+        if intrinsic:
+            # the intrinsic Delaunay Laplacian (nonnegative interior weights: no spikes of u next to
+            # needle triangles); Omega does not change under intrinsic flips (docs/robustness.md)
+            T = intrinsic_delaunay(V, F, mollify_delta=0.0)
+            self.L = T.cotan_laplacian().tocsr()
+            self.intrinsic = T
+        else:
+            self.L = cotan_laplacian(V, F)
         self.A = face_areas(V, F)
         loops = topology.boundary_loops(F, n)
         self.loops = loops
@@ -148,6 +163,45 @@ class ConeSystem:
             rhs = np.r_[-self.u0[S], self.total]
             return np.linalg.lstsq(M, rhs, rcond=None)[0][:k]
         return np.linalg.lstsq(G, -self.u0[S], rcond=None)[0]
+
+    def l2_angles(self, S, lower=None, upper=None, shift=None):
+        """Cone curvatures kappa (k,) minimising the area-weighted spread ``sum_i a_i (u_i - c)^2``
+        of the log scale over all vertices (``a_i`` a third of the incident triangles' area, ``c``
+        free), subject to the sum rule on a closed surface and ``lower <= kappa <= upper``
+        (default ``L2_BOUNDS``); ``shift`` (n,) optional, added to ``u`` (the exact metric's correction,
+        see ``cone_unwrap``): a bounded least-squares problem in k+1 unknowns built from the
+        cones' Green's columns. Cheap, and on spot, rocker-arm and cheburashka a better start for the
+        per-triangle 1%/99% spread than BFF's rule or the L-inf angles (docs/cones.md)."""
+        from scipy.optimize import lsq_linear
+        S = np.asarray(S, np.int64)
+        k = len(S)
+        if k == 0:
+            return np.zeros(0)
+        lo = L2_BOUNDS[0] if lower is None else lower
+        hi = L2_BOUNDS[1] if upper is None else upper
+        w = self.vertex_area / self.vertex_area.sum()
+        A = np.c_[self.columns(S), -np.ones(self.n)]            # u - c = u0 + A [kappa; c]
+        M = A.T @ (w[:, None] * A)
+        g = A.T @ (w * (self.u0 if shift is None else self.u0 + shift))
+        # ||W^1/2 (u0 + A x)||^2 = ||R x + R^-T g||^2 + const with M = R^T R (eigen square root:
+        # M is only semidefinite without cones that move u)
+        ev, Q = np.linalg.eigh(M)
+        ev = np.maximum(ev, 1e-14 * max(ev.max(), 1e-300))
+        R = (Q * np.sqrt(ev)).T
+        b = -(Q.T @ g) / np.sqrt(ev)
+        if self.needs_sum:
+            big = 1e3 * np.sqrt(ev.max())
+            R = np.r_[R, big * np.r_[np.ones(k), 0.0][None]]
+            b = np.r_[b, big * self.total]
+        bl = np.r_[np.full(k, lo), -np.inf]
+        bu = np.r_[np.full(k, hi), np.inf]
+        if self.needs_sum and k * hi < self.total:
+            bu[:k] = self.total / k + 1e-9
+        x = lsq_linear(R, b, bounds=(bl, bu), method='bvls').x
+        kap = x[:k]
+        if self.needs_sum:
+            kap = kap + (self.total - kap.sum()) / k                # the sum rule to round-off
+        return kap
 
     def rings(self, S, depth=1):
         """(n,) bool: the vertices within ``depth`` edges of the cones ``S``."""
@@ -249,50 +303,94 @@ def face_spread(F, A, u, q=1.0):
     return float(np.exp(lo - hi))
 
 
+def weighted_spread(x, w, q=1.0):
+    """Area-weighted ``q``% / ``(100-q)``% percentile ratio of positive per-triangle values ``x`` (m,)
+    with weights ``w`` (m,) (e.g. the realised scale ``mu`` and the 3D areas): the acceptance measure
+    'p1/p99' of docs/cones.md. NaN entries are ignored."""
+    ok = np.isfinite(x) & (x > 0)
+    return face_spread(np.arange(ok.sum())[:, None], w[ok], np.log(x[ok]), q)
+
+
 def _score(system, S):
-    """(spread, kappa): the 1%/99% spread of the per-triangle scale with BFF's angles on cones ``S``."""
-    kap = system.dirichlet_angles(S)
+    """(spread, kappa): the 1%/99% spread of the per-triangle scale with the area-L2 angles
+    (``ConeSystem.l2_angles``) on cones ``S``."""
+    kap = system.l2_angles(S)
     return face_spread(system.F, system.A, system.u_of(S, kap)), kap
 
 
-def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None):
-    """Cone placement: greedy, then local moves, then L-inf angles (docs/cones.md, "Placement").
-
-    1. Greedy (BFF's rule): the next cone goes to the vertex of largest ``|u - u_cone|`` outside the
-       cones' one-rings, where ``u`` has the cones at one common value (``dirichlet_angles``); one
-       Green's column per cone. It stops when the area-weighted 1%/99% spread of the scale
-       (``face_spread``) reaches ``target_ratio`` (None: never) or at ``max_cones``.
-    2. ``sweeps`` passes of local moves: each cone tries the vertices of its one-ring and moves where
-       the spread improves (with the angles re-solved).
-    3. The angles are re-solved for the L-inf objective (``ConeSystem.linf_angles``); they are kept
-       if they improve the spread.
-    ``system``: ``ConeSystem``. Returns (cones (c,), kappa (c,), history list of (count, spread))."""
-    report = progress or (lambda f, msg: None)
+def _greedy(system, target_ratio, max_cones, candidates, report):
+    """Greedy cone placement. ``candidates`` > 0: the look-ahead rule (the ``candidates`` most extreme
+    vertices of ``u``, half at each end, are scored by ``_score`` and the best is kept); 0: BFF's rule
+    (the vertex of largest ``|u - u_cone|`` with BFF's angles, u equal at the cones). Returns (cones
+    list, history list of (count, spread))."""
     S = []
+    w = system.vertex_area / system.vertex_area.sum()
     if system.needs_sum:
-        va = system.vertex_area / system.vertex_area.sum()
-        u = system.solve(system.total * va - system.Omega)
+        u = system.solve(system.total * w - system.Omega)
     else:
         u = system.u0.copy()
     history = [(0, face_spread(system.F, system.A, u))]
-    kap = np.zeros(0)
+    best = history[-1][1]
     min_cones = 3 if system.needs_sum and system.chi > 0 else 0
+    half = max(1, candidates // 2)
     while len(S) < max_cones:
-        if target_ratio is not None and history[-1][1] >= target_ratio and len(S) >= min_cones:
+        if target_ratio is not None and best >= target_ratio and len(S) >= min_cones:
             break
-        report(0.7 * len(S) / max(1, max_cones), f"placing cone {len(S) + 1}")
-        ref = u[S[0]] if S else np.median(u[system.eligible]) if system.eligible.any() else 0.0
-        dev = np.abs(u - ref)
-        dev[~system.eligible] = -1
+        report(0.35 * len(S) / max(1, max_cones), f"placing cone {len(S) + 1}")
+        ok = system.eligible.copy()
         if S:
-            dev[system.rings(S, 1)] = -1
-        v = int(np.argmax(dev))
-        if dev[v] < 0:
+            ok &= ~system.rings(S, 1)
+        idx = np.nonzero(ok)[0]
+        if not len(idx):
             break
-        S.append(v)
-        kap = system.dirichlet_angles(S)
+        if candidates:
+            order = idx[np.argsort(u[idx] - (w * u).sum())]
+            cand = np.unique(np.r_[order[:half], order[-half:]])
+            system.columns(cand)
+            trial = None
+            for v in cand.tolist():
+                sc, kk = _score(system, S + [v])
+                if trial is None or sc > trial[0]:
+                    trial = (sc, v, kk)
+            best, v, kap = trial
+            S.append(v)
+        else:
+            ref = u[S[0]] if S else np.median(u[system.eligible])
+            S.append(int(idx[np.argmax(np.abs(u[idx] - ref))]))
+            kap = system.dirichlet_angles(S)
+            best = face_spread(system.F, system.A, system.u_of(S, kap))
         u = system.u_of(S, kap)
-        history.append((len(S), face_spread(system.F, system.A, u)))
+        history.append((len(S), best))
+    return S, history
+
+
+def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None, candidates=None):
+    """Cone placement: two greedy runs, the better one refined by local moves (docs/cones.md,
+    "Placement").
+
+    1. Greedy with a look-ahead: ``candidates`` vertices are tried for the next cone, the most
+       extreme of ``u`` at each end (half the highest, half the lowest, outside the cones'
+       one-rings); each is scored by the area-weighted 1%/99% spread of the per-triangle scale
+       (``face_spread``) with the angles re-solved (``l2_angles``), and the best is kept. One Green's
+       column per candidate (cached). And BFF's greedy (the vertex of largest ``|u - u_cone|``; it
+       finds the exact corners of a cube). Each stops when the spread reaches ``target_ratio`` (None:
+       never) or at ``max_cones``; the run that reaches the target with fewer cones, else the better
+       spread (``_score``), is kept.
+    2. ``sweeps`` passes of local moves: each cone tries the vertices of its one-ring and moves where
+       the spread improves (angles re-solved).
+    ``system``: ``ConeSystem``. ``candidates``: per greedy step (default 12; on meshes over
+    ``BIG_MESH`` vertices only BFF's greedy runs). Returns (cones (c,), kappa (c,), history list of
+    (count, spread))."""
+    report = progress or (lambda f, msg: None)
+    if candidates is None:
+        candidates = 12 if system.n <= BIG_MESH else 0
+    runs = []
+    for c in sorted({candidates, 0}, reverse=True):
+        S, hist = _greedy(system, target_ratio, max_cones, c, report)
+        sc = _score(system, S)[0] if S else hist[-1][1]
+        hit = target_ratio is not None and sc >= target_ratio
+        runs.append(((hit, -len(S) if hit else 0, sc), S, hist))
+    _, S, history = max(runs, key=lambda r: r[0])
     if not S:
         return np.zeros(0, np.int64), np.zeros(0), history
     best, kap = _score(system, S)
@@ -306,36 +404,176 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None)
             nb = adj[S[i]].indices
             nb = nb[system.eligible[nb] & ~blocked[nb]]
             system.columns(nb)
-            for w in nb.tolist():
-                T = S[:i] + [w] + S[i + 1:]
+            for v in nb.tolist():
+                T = S[:i] + [v] + S[i + 1:]
                 sc, kk = _score(system, T)
                 if sc > best + 1e-9:
                     best, kap, S, moved = sc, kk, T, True
         history.append((len(S), best))
         if not moved:
             break
-    report(0.9, "solving the cone angles")
-    S = np.array(S, np.int64)
-    k_inf, sp_inf = system.trimmed_angles(S, rounds=3 if system.n <= BIG_MESH else 1)
-    if k_inf is not None:
-        if sp_inf > best:
-            kap, best = k_inf, sp_inf
-            history.append((len(S), best))
-    return S, np.asarray(kap, np.float64), history
+    return np.array(S, np.int64), np.asarray(kap, np.float64), history
 
 
 # ------------------------------------------------------------------------------------------------
 # layout of the cut disk
 # ------------------------------------------------------------------------------------------------
-def _boundary_data(Vc, Fc, loop, uc):
+def _boundary_data(Vc, Fc, loop, uc, vert_of=None, Lu=None, cache=None):
     """Turning angles ``k~`` (nb,) and target lengths ``l~`` (nb,) of the cut disk's boundary ``loop``
-    (edge j from loop[j] to loop[j+1]) for the log scale ``uc`` (N,) on the split vertices."""
-    L = cotan_laplacian(Vc, Fc)
+    (edge j from loop[j] to loop[j+1]) for the log scale ``uc`` (N,) on the split vertices.
+
+    ``k~ = k + (L u)_B`` with the cut disk's own cotan ``L`` (``_disk_laplacian``). ``Lu`` (n,): the
+    closed surface's ``L u`` from the operator ``u`` was solved with (the intrinsic Delaunay
+    Laplacian), with ``vert_of`` (N,) the input vertex of each split vertex: the difference to the
+    cut disk's split is shared equally by the copies of each vertex, so that the copies' turning angles sum to
+    ``Omega + (L u)`` of the closed operator (the cone curvature; 0 on a seam between cones) and the
+    two sides of a seam stay congruent."""
+    L = _disk_laplacian(Vc, Fc, cache)
     s = angle_sums(Vc, Fc)
-    kt = np.pi - s[loop] + (L @ uc)[loop]
+    Luc = L @ uc
+    if Lu is not None:
+        n = len(Lu)
+        copies = np.bincount(vert_of, minlength=n)
+        resid = Lu - np.bincount(vert_of, Luc, minlength=n)
+        Luc = Luc + (resid / np.maximum(copies, 1))[vert_of]
+    kt = np.pi - s[loop] + Luc[loop]
     l = np.linalg.norm(Vc[np.roll(loop, -1)] - Vc[loop], axis=1)
     lt = np.exp(0.5 * (uc[loop] + uc[np.roll(loop, -1)])) * l
     return kt, lt, L
+
+
+def _disk_laplacian(Vc, Fc, cache=None):
+    """The cut disk's Laplacian (N,N), for its boundary data and for the UVs' harmonic extension:
+    the intrinsic Delaunay cotan Laplacian of the cut disk (its boundary, i.e. the cut, is never
+    flipped), which has no negative interior weights, so the extension keeps the maximum principle
+    next to needle triangles (docs/robustness.md). Kept in ``cache`` for the same cut disk."""
+    key = (len(Vc), hash(Fc.tobytes()))
+    if cache is not None and cache.get('disk_key') == key:
+        return cache['disk']
+    T = intrinsic_delaunay(Vc, Fc, mollify_delta=0.0)
+    L = T.cotan_laplacian().tocsr() if T.report['flips'] else cotan_laplacian(Vc, Fc)
+    if cache is not None:
+        cache['disk_key'], cache['disk'], cache['disk_T'] = key, L, T
+    return L
+
+
+def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-10, fac0=None):
+    """Exact flat cone metric by Newton's method on the discrete conformal (Yamabe) equation
+    (docs/cones.md, "Exact layout").
+
+    ``T``: the cut disk's intrinsic triangulation (``IntrinsicTriangulation`` on N split vertices);
+    ``vert_of`` (N,) the surface vertex of each split vertex; ``n`` surface vertices. The unknown is
+    one log scale ``u`` (n,) per surface vertex (the same on every copy, so the two sides of a seam
+    keep equal lengths); the lengths are ``l~_e = exp((u_a + u_b)/2) l_e``. ``target`` (n,) the
+    angle sums wanted (radians: ``2*pi - kappa``); ``fixed`` (n,) bool vertices whose ``u`` stays at
+    ``u0`` (n,) (a ground vertex, or the surface's boundary). Newton step: ``L(u) du = s(u) - target``
+    (``s`` the angle sums, ``L(u)`` the cotan Laplacian of the current lengths, the Hessian of the
+    convex discrete conformal energy), with backtracking that lowers the residual; the Hessian is
+    factored again only when the residual stops falling fast (chord steps in between). ``fac0``: an
+    optional first factorisation of a nearby Hessian on the same free vertices (the closed surface's
+    Laplacian of ``ConeSystem``), which saves the first factorisation. A triangle whose lengths
+    break the triangle inequality counts with the angles (pi, 0, 0) (the energy's convex extension;
+    it lays out flat). Returns (u (n,), edge lengths (E,),
+    count of such flat triangles) or None when it does not converge."""
+    import scipy.sparse as sp
+    a0, a1 = vert_of[T.edge_vertices()].T
+    Fo = vert_of[T.F]
+    free = np.nonzero(~fixed)[0]
+    nxt, prv = np.array([1, 2, 0]), np.array([2, 0, 1])
+
+    def state(u):
+        el = T.edge_lengths * np.exp(0.5 * (u[a0] + u[a1]))
+        l = el[T.FE]
+        valid = (l.sum(1, keepdims=True) - 2 * l > 0).all(1)
+        # an invalid triangle has the angles (pi, 0, 0) (the convex extension of the energy)
+        r = np.bincount(Fo.ravel(), corner_angles_l(l).ravel(), minlength=n) - target
+        r[fixed] = 0.0
+        return el, l, r, valid
+
+    u = np.array(u0, np.float64)
+    st = state(u)
+    fac, fresh, last = fac0, False, np.inf
+    for _ in range(max_iter):
+        el, l, r, valid = st
+        norm = float(np.linalg.norm(r))
+        if float(np.abs(r).max()) < tol:
+            break
+        # the Hessian is factored again only when the residual stops falling fast (a chord step
+        # with the previous factorisation costs one solve; a factorisation of a 100k mesh ~1 s)
+        if fac is None or norm > REFACTOR * last:
+            with np.errstate(divide='ignore', invalid='ignore'):
+                w = 0.5 * corner_cotangents_l(l)
+            w[~valid] = 0.0
+            i, j = Fo[:, nxt].ravel(), Fo[:, prv].ravel()
+            w = w.ravel()
+            H = sp.csc_matrix((np.r_[-w, -w, w, w], (np.r_[i, j, i, j], np.r_[j, i, i, j])), shape=(n, n))
+            try:
+                fac, fresh = Factor(H[free][:, free].tocsc()), True
+            except (ConformalError, RuntimeError, ValueError):
+                return None
+        else:
+            fresh = False
+        last = norm
+        du = fac.solve(r[free])
+        if not np.isfinite(du).all():
+            return None
+        t = 1.0
+        while t > 1e-3:
+            u2 = u.copy()
+            u2[free] += t * du
+            st2 = state(u2)
+            if np.linalg.norm(st2[2]) < (1 - 1e-4 * t) * norm:
+                break
+            t *= 0.5
+        else:
+            if fresh:
+                break                              # no progress: converged to round-off or stuck
+            fac, last = None, np.inf               # a stale Hessian: factor again
+            continue
+        u, st = u2, st2
+    ok = float(np.abs(st[2]).max()) < 1e3 * tol
+    return (u, st[0], int((~st[3]).sum())) if ok else None
+
+
+def unfold(T, el):
+    """Lay out the triangles of a flat disk ``T`` (``IntrinsicTriangulation``) with edge lengths
+    ``el`` (E,) in the plane, face by face across interior edges (breadth first, one array step per
+    ring of faces). Returns positions (N,2), counter-clockwise like the faces; units of ``el``."""
+    F, FE, EF, EC = T.F, T.FE, T.EF, T.EC
+    m, N = len(F), T.n
+    Z = layout(el[FE]) @ np.array([1.0, 1j])                    # (m,3) complex local copies
+    pos = np.full(N, np.nan + 0j)
+    placed = np.zeros(m, bool)
+    pos[F[0]] = Z[0]
+    placed[0] = True
+    front = np.array([0])
+    nxt, prv = np.array([1, 2, 0]), np.array([2, 0, 1])
+    while len(front):
+        e = FE[front].ravel()
+        f0 = np.repeat(front, 3)
+        side = (EF[e, 0] == f0).astype(np.int64)                # the other side of each edge
+        f2, c = EF[e, side], EC[e, side]
+        ok = f2 >= 0
+        f2, c = f2[ok], c[ok]
+        ok = ~placed[f2]
+        f2, c = f2[ok], c[ok]
+        f2, first = np.unique(f2, return_index=True)
+        c = c[first]
+        if not len(f2):
+            break
+        i, j, k = F[f2, nxt[c]], F[f2, prv[c]], F[f2, c]
+        zi, zj, zk = Z[f2, nxt[c]], Z[f2, prv[c]], Z[f2, c]
+        rot = (pos[j] - pos[i]) / (zj - zi)
+        rot /= np.abs(rot)
+        newk = np.isnan(pos[k])
+        kk, first = np.unique(k[newk], return_index=True)
+        pos[kk] = (pos[i] + rot * (zk - zi))[newk][first]
+        placed[f2] = True
+        front = f2
+    return np.stack([pos.real, pos.imag], axis=1)
+
+
+
 
 
 def paired_polygon(kt, lt, pair):
@@ -390,15 +628,49 @@ def _harmonic(L, loop, PB, cache=None):
     X[loop] = PB
     if len(I):
         LI = L[I]
-        key = (N, loop.tobytes())
-        fac = cache.get(key) if cache is not None else None
+        key = (N, loop.tobytes(), id(L))
+        fac = cache['fac'] if cache is not None and cache.get('fac_key') == key else None
         if fac is None:
             fac = Factor(LI[:, I])
             if cache is not None:
-                cache.clear()
-                cache[key] = fac
+                cache['fac_key'], cache['fac'] = key, fac
         X[I] = -fac.solve(LI[:, loop] @ PB)
     return X
+
+
+def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS):
+    """Local repair of an exact layout ``uv`` (N,2), in place: the input triangles are laid out with
+    straight edges between the vertices of the intrinsic triangulation, so a needle triangle can come
+    out flipped or flat. The vertices within ``1 + round`` rings of such triangles (not on the cut
+    disk's boundary ``loop``, so seam copies stay congruent) are re-placed by the harmonic map with
+    nonnegative weights (``clamped_laplacian`` of ``Lc``, a convex combination of the neighbours).
+    Returns the number of rounds used."""
+    N = len(uv)
+    onb = np.zeros(N, bool)
+    onb[loop] = True
+    adj = None
+    for r in range(rounds):
+        area = signed_uv_areas(uv, Fc)
+        bad = area <= 1e-14 * np.abs(area).sum()
+        if not bad.any():
+            return r
+        if adj is None:
+            adj = topology.vertex_adjacency(Fc, N)
+        mark = np.zeros(N, bool)
+        mark[Fc[bad].ravel()] = True
+        for _ in range(1 + r):
+            mark |= adj @ mark.astype(np.int8) > 0
+        mark &= ~onb
+        M = np.nonzero(mark)[0]
+        if not len(M):
+            return r
+        Lp = clamped_laplacian(Lc, np.ones(N, bool)).tocsr()
+        R = np.nonzero(~mark)[0]
+        try:
+            uv[M] = Factor(Lp[M][:, M].tocsc()).solve(-(Lp[M][:, R] @ uv[R]))
+        except (ConformalError, RuntimeError, ValueError):
+            return r
+    return rounds
 
 
 def _wedge_middle(Vc, Fc, loop, corner):
@@ -422,14 +694,31 @@ def _wedge_middle(Vc, Fc, loop, corner):
     return min(inner)[1] if inner else None
 
 
-def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None):
-    """Cut ``(V, F)`` along ``seams`` (k,2) and lay the disk out with the closed-surface log scale
-    ``u`` (n,). A cone whose wedge exceeds ``WEDGE_MAX`` (a negative cone at a leaf of the cut) gets
-    the twig of a positive leaf cone rerouted through it (at most ``max_branches`` times).
+def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=None, exact=True,
+               fac0=None):
+    """Cut ``(V, F)`` along ``seams`` (k,2) and lay the disk out for the cone curvatures ``kappa`` (c,)
+    at ``cones`` (c,), with the closed-surface linear log scale ``u`` (n,) (``Lu``: its ``L u``).
+
+    ``exact``: the exact flat cone metric (``flat_cone_metric``) unfolded (``unfold``); if Newton
+    fails, the BFF-style layout of the linear ``u`` (a paired boundary polygon extended
+    harmonically). A cone whose wedge exceeds ``WEDGE_MAX`` (a negative cone at a leaf of the cut, or
+    one split unevenly; the exact metric's wedge when there is one, else the linear estimate) gets a
+    new branch of the cut through the middle of that wedge (``through_corner``, else
+    ``reroute_leaf``), at most ``max_branches`` times.
     Returns (cut (``islands.Cut``), loop (nb,), uv (N,2) per split vertex, seams (k',2), info dict)."""
     n = len(V)
     seams = np.asarray(seams, np.int64).reshape(-1, 2)
+    cache = {} if cache is None else cache
     added = 0
+    failed = set()
+    kap_all = np.zeros(n)
+    kap_all[np.asarray(cones, np.int64)] = kappa
+    fixed = np.zeros(n, bool)
+    bl = topology.boundary_loops(F, n)
+    for lp in bl:
+        fixed[lp] = True
+    if not bl:
+        fixed[0] = True                      # the ground of ConeSystem, whose factor is ``fac0``
     while True:
         cut = cut_along_seams(F, n, seams)
         Fc, vert_of = cut.F, cut.vert_of
@@ -437,32 +726,61 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None):
             raise ConformalError("the cut graph does not open the surface into a disk", 'bad_topology')
         loop = topology.boundary_loops(Fc, len(vert_of))[0]
         Vc, uc = V[vert_of], u[vert_of]
-        kt, lt, Lc = _boundary_data(Vc, Fc, loop, uc)
+        kt, lt, Lc = _boundary_data(Vc, Fc, loop, uc, vert_of, Lu, cache)
         wedge = np.pi - kt
-        bad = np.nonzero(wedge > WEDGE_MAX)[0]
+        got = None
+        if exact and (n <= BIG_MESH or not (wedge > WEDGE_MAX).any() or added >= max_branches):
+            # (big meshes: the linear wedges steer the branches; one exact solve at the end)
+            T = cache['disk_T']
+            got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, u - u[fixed].mean(),
+                                   fac0=fac0)
+            if got is None:
+                got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, np.zeros(n))
+            if got is not None:
+                ang = corner_angles_l(got[1][T.FE])
+                wedge = np.bincount(T.F.ravel(), ang.ravel(), minlength=len(vert_of))[loop]
+        bad = np.nonzero((wedge > WEDGE_MAX) & ~np.isin(vert_of[loop], list(failed)))[0]
         if len(bad) == 0 or added >= max_branches:
             break
         cc = int(loop[bad[np.argmax(wedge[bad])]])
         c = int(vert_of[cc])
         w0 = _wedge_middle(Vc, Fc, loop, cc)
         if w0 is None:
-            break
+            failed.add(c)
+            continue
         deg = np.bincount(seams.ravel(), minlength=n)
         pos = np.asarray(cones)[(np.asarray(kappa) > 0) & (deg[np.asarray(cones, np.int64)] == 1)]
         stop = np.zeros(n, bool)
         stop[np.asarray(cones, np.int64)] = True
-        for lp in topology.boundary_loops(F, n):
+        for lp in bl:
             stop[lp] = True
         protect = np.zeros(n, bool)
         protect[np.asarray(cones, np.int64)[np.asarray(kappa) < 0]] = True
-        new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect)
+        new = through_corner(V, F, seams, c, int(vert_of[w0]), stop, protect)
+        if new is not None:
+            c2 = cut_along_seams(F, n, new)
+            if c2.n_islands != 1 or not is_disk(c2.F, len(c2.vert_of)):
+                new = None
         if new is None:
-            break
+            new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect)
+        if new is None:
+            failed.add(c)                    # try the next corner; this one keeps its wedge
+            continue
         seams = straighten(F, new, stop)
         added += 1
     a, b = vert_of[loop], vert_of[np.roll(loop, -1)]
     key = np.minimum(a, b) * n + np.maximum(a, b)
     _, pair = np.unique(key, return_inverse=True)
+    info = {'repair_rounds': 0, 'branches_added': added, 'max_wedge': float(wedge.max()),
+            'pair': pair.ravel(), 'exact': False}
+    if got is not None:
+        uv = unfold(cache['disk_T'], got[1])
+        if np.isfinite(uv).all():
+            info['exact'] = True
+            info['flat_triangles'] = got[2]
+            info['u_exact'] = got[0]
+            info['repair_rounds'] = _relax_folds(Fc, loop, uv, Lc)
+            return cut, loop, uv, seams, info
     P = paired_polygon(kt, lt, pair.ravel())
     uv = _harmonic(Lc, loop, P, cache)
     repaired = 0
@@ -478,22 +796,27 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None):
             mark |= adj @ mark.astype(np.int8) > 0
         uv = _harmonic(clamped_laplacian(Lc, mark), loop, P)
         repaired += 1
-    info = {'repair_rounds': repaired, 'branches_added': added, 'max_wedge': float(wedge.max()),
-            'pair': pair.ravel()}
+    info['repair_rounds'] = repaired
     return cut, loop, uv, seams, info
 
 
 # ------------------------------------------------------------------------------------------------
 # the public entry point
 # ------------------------------------------------------------------------------------------------
-def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None):
+def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
     """Lay out and measure one set of cone angles on the cut ``seams``: dict with cut, loop, uv (N,2)
     per split vertex (UV area = 3D area), seams, info, measured (``measures_from_jacobians``),
     crossings (boundary self-crossings) and u (n,)."""
     u = system.u_of(S, kappa)
     u -= np.median(u)
     cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa, cache=cache,
-                                             max_branches=16 if len(Vw) <= BIG_MESH else 4)
+                                             max_branches=16 if len(Vw) <= BIG_MESH else 4,
+                                             Lu=system.L @ u, fac0=system._fac)
+    crossings = boundary_crossings(uvc, [loop])
+    splits = 0
+    if crossings and split:
+        cut, uvc, seams, crossings, splits = split_overlaps(Vw, Fw, cut, uvc, seams)
+    info['charts'], info['splits'] = int(cut.n_islands), splits
     Fc = cut.F
     W = uvc[Fc]
     e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
@@ -503,12 +826,136 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None):
                              "degenerate", 'degenerate', 'clean_mesh')
     uvc = (uvc - uvc.mean(0)) * np.sqrt(system.A.sum() / a_uv)
     J, A = jacobians(Vw[cut.vert_of], Fc, uvc)
-    measured, _ = measures_from_jacobians(J, A)
+    measured, mu = measures_from_jacobians(J, A)
+    measured['mu_ratio_p1_p99_area'] = weighted_spread(mu, A)
     sv = singular_values(J)
     # a triangle squashed to (nearly) nothing is as unusable as a flipped one
     measured['degenerate'] = int((sv[:, 1] <= DEGENERATE_QC ** -1 * sv[:, 0]).sum())
     return {'cut': cut, 'loop': loop, 'uv': uvc, 'seams': seams, 'info': info, 'measured': measured,
-            'crossings': boundary_crossings(uvc, [loop]), 'u': u}
+            'crossings': crossings, 'u': u}
+
+
+def _piece_crossings(Fc, uvc, face_island, n_islands, segments=False):
+    """Boundary self-crossings of every piece (island) of a cut layout: list of (count, segments
+    (k,2) of split-vertex pairs, boundary loops) per piece."""
+    out = []
+    for i in range(n_islands):
+        Fi = Fc[face_island == i]
+        loops = topology.boundary_loops(Fi, len(uvc))
+        cnt, seg = boundary_crossings(uvc, loops, return_segments=True)
+        out.append((cnt, seg, loops))
+    return out
+
+
+def _interior_path(V, vert_of, E, onb, p, q, N, lp=None):
+    """Shortest path (list of split vertices) from ``p`` to ``q`` over the edges ``E`` (k,2) with their
+    3D lengths, or None. Edges touching a boundary vertex (``onb`` (N,) bool) other than ``p`` and
+    ``q`` cost ten times their length (such a path splits a piece into more than two, which is
+    allowed), and the boundary edges of ``lp`` (the loop) are never used."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import dijkstra
+    if p == q:
+        return None
+    end = np.zeros(N, bool)
+    end[[p, q]] = True
+    if lp is not None:
+        a, b = lp, np.roll(lp, -1)
+        bkey = np.minimum(a, b) * N + np.maximum(a, b)
+        E = E[~np.isin(np.minimum(E[:, 0], E[:, 1]) * N + np.maximum(E[:, 0], E[:, 1]), bkey)]
+    w = np.maximum(np.linalg.norm(V[vert_of[E[:, 0]]] - V[vert_of[E[:, 1]]], axis=1), 1e-300)
+    touch = (onb[E[:, 0]] & ~end[E[:, 0]]) | (onb[E[:, 1]] & ~end[E[:, 1]])
+    w = np.where(touch, 10 * w, w)
+    G = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(N, N)).tocsr()
+    dist, pred = dijkstra(G, directed=False, indices=p, return_predecessors=True)
+    if not np.isfinite(dist[q]):
+        return None
+    path = [q]
+    while path[-1] != p:
+        path.append(int(pred[path[-1]]))
+    return path
+
+
+def _crossing_pairs(uv, seg):
+    """Pairs of the segments ``seg`` (k,2) (vertex pairs, positions ``uv``) that cross each other."""
+    P, Q = uv[seg[:, 0]], uv[seg[:, 1]]
+
+    def orient(p, q, r):
+        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1])
+                       - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+    a, b = np.triu_indices(len(seg), 1)
+    x = (orient(P[a], Q[a], P[b]) * orient(P[a], Q[a], Q[b]) < 0) & \
+        (orient(P[b], Q[b], P[a]) * orient(P[b], Q[b], Q[a]) < 0)
+    return [(seg[i], seg[j]) for i, j in zip(a[x], b[x])]
+
+
+def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
+    """Split an overlapping layout into charts (docs/cones.md, "Charts"). The layout of the cut disk
+    is one flat metric, so any piece of it is laid out by the same coordinates: a piece whose boundary
+    crosses itself is cut in two along the shortest interior path between the middles of the two
+    boundary arcs that the first crossing pair separates, which puts the two crossing segments into
+    different pieces; repeated up to ``max_splits`` times. The pieces are then moved apart (shelf
+    packing). ``V`` (n,3), ``F`` (m,3) the working mesh; ``cut`` (``islands.Cut``) and ``uvc`` (N,2)
+    its cut disk and layout; ``seams`` (k,2). Returns (cut, uvc, seams, crossings left, splits)."""
+    n = len(V)
+    splits = 0
+    while True:
+        pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands)
+        bad = [i for i, (c, _, _) in enumerate(pieces) if c]
+        if not bad or splits >= max_splits:
+            break
+        added = None
+        for i in bad:
+            cnt, seg, loops = pieces[i]
+            if len(loops) != 1:
+                continue
+            lp = loops[0]
+            pos = -np.ones(len(uvc), np.int64)
+            pos[lp] = np.arange(len(lp))
+            for s1, s2 in _crossing_pairs(uvc, seg):
+                a, b = int(pos[s1[0]]), int(pos[s2[0]])
+                if a < 0 or b < 0:
+                    continue
+                nl = len(lp)
+                Fi = cut.F[cut.face_island == i]
+                E0, _ = topology.unique_edges(Fi)
+                onb = np.zeros(len(uvc), bool)
+                onb[lp] = True
+                path = None
+                arc1, arc2 = (b - a) % nl, (a - b) % nl
+                for f1, f2 in ((2, 2), (1, 2), (3, 2), (2, 1), (2, 3), (1, 1), (3, 3)):
+                    p = int(lp[(a + arc1 * f1 // 4) % nl])
+                    q = int(lp[(b + arc2 * f2 // 4) % nl])
+                    path = _interior_path(V, cut.vert_of, E0, onb, p, q, len(uvc), lp)
+                    if path is not None:
+                        break
+                if path is None:
+                    continue
+                pv = cut.vert_of[np.array(path)]
+                added = np.sort(np.stack([pv[:-1], pv[1:]], axis=1), axis=1)
+                break
+            if added is not None:
+                break
+        if added is None:
+            break
+        seams = np.unique(np.r_[seams, added], axis=0)
+        new = cut_along_seams(F, n, seams)
+        uv2 = np.zeros((len(new.vert_of), 2))
+        uv2[new.F.ravel()] = uvc[cut.F.ravel()]
+        cut, uvc = new, uv2
+        splits += 1
+    left = sum(c for c, _, _ in _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands))
+    if cut.n_islands > 1:
+        # move the pieces apart
+        from .islands import shelf_pack
+        lo = np.full((cut.n_islands, 2), np.inf)
+        hi = np.full((cut.n_islands, 2), -np.inf)
+        vi = cut.vert_island
+        np.minimum.at(lo, vi, uvc)
+        np.maximum.at(hi, vi, uvc)
+        size = hi - lo
+        off, _ = shelf_pack(size, 0.02 * np.sqrt((size[:, 0] * size[:, 1]).sum()))
+        uvc = uvc - lo[vi] + off[vi]
+    return cut, uvc, seams, int(left), splits
 
 
 def _split_nonmanifold(V, F):
@@ -599,6 +1046,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
             return
         # the cut is fixed by the cones; a leaf of it is one wedge, so its kappa must be positive
         leaf = deg[S] <= 1
+        if leaf.any():
+            yield 'l2, leaves >= 0.4', system.l2_angles(S, lower=np.where(leaf, KAPPA_LEAF, L2_BOUNDS[0]))
         for floor in ANGLE_FLOORS:
             k2, _ = system.trimmed_angles(S, lower=np.where(leaf, KAPPA_LEAF, max(floor, KAPPA_MIN)),
                                           rounds=3 if n <= BIG_MESH else 1)
@@ -611,7 +1060,19 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     best = None
     tried = []
     cache = {}
-    for label, kap in cands:
+    def corrected():
+        """Angle sets that account for the exact metric: the realised log scale differs from the
+        linear one by ``d = u_exact - u_linear``, nearly independent of small angle changes; the area-L2
+        angles are re-solved for ``u_linear + d`` (a fixed-point step), from the best layout so far."""
+        for it in range(CORRECTIONS if n <= BIG_MESH and not given and len(S) else 0):
+            if best is None or 'u_exact' not in best[3]['info']:
+                return
+            ue = best[3]['info']['u_exact']
+            d = ue - system.u_of(S, best[2])
+            yield f'l2, exact-metric correction {it + 1}', system.l2_angles(S, shift=d - np.median(d))
+
+    import itertools
+    for label, kap in itertools.chain(cands, corrected()):
         if best is not None and best[0][0] and n > BIG_MESH:
             break                                   # big mesh: the first valid layout is kept
         try:
@@ -622,9 +1083,11 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         me = ev['measured']
         tried.append({'angles': label, 'flips': me['flips'], 'overlaps': ev['crossings'],
                       'degenerate': me['degenerate'], 'mu_ratio_p1_p99': me['mu_ratio_p1_p99'],
-                      'qc_mean': me['qc_mean']})
+                      'mu_ratio_p1_p99_area': me['mu_ratio_p1_p99_area'],
+                      'qc_mean': me['qc_mean'], 'exact': ev['info']['exact'],
+                      'charts': ev['info']['charts']})
         defects = me['flips'] + ev['crossings'] + me['degenerate']
-        key = (defects == 0, -defects, me['mu_ratio_p1_p99'])
+        key = (defects == 0, -defects, me['mu_ratio_p1_p99_area'])
         if best is None or key > best[0]:
             best = (key, label, kap, ev)
     if best is None:
@@ -651,7 +1114,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         'overlaps': int(crossings),
         'seam_edges': int(len(seams)), 'seam_length': seam_len * unit, 'seam_fraction': seam_len / total_len,
         'branches_added': linfo['branches_added'], 'max_wedge': linfo['max_wedge'],
-        'repair_rounds': linfo['repair_rounds'],
+        'repair_rounds': linfo['repair_rounds'], 'exact_layout': linfo['exact'],
+        'charts': linfo['charts'], 'chart_splits': linfo['splits'],
         'vertex_ratio': float(np.exp(u.min() - u.max())),
         'vertex_ratio_outside_rings': float(np.exp(u[rows].min() - u[rows].max())),
         'estimated_p1_p99': face_spread(Fw, system.A, u),
@@ -668,9 +1132,9 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                         f"(s1/s2 > {DEGENERATE_QC:g})")
     if crossings:
         warnings.append(f"the layout overlaps itself ({crossings} boundary crossing(s))")
-    if target_ratio is not None and cones is None and measured['mu_ratio_p1_p99'] < target_ratio:
-        warnings.append(f"the 1%/99% scale ratio {measured['mu_ratio_p1_p99']:.3f} is below the target "
-                        f"{target_ratio} with {len(S)} cones (max_cones={max_cones})")
+    if target_ratio is not None and cones is None and measured['mu_ratio_p1_p99_area'] < target_ratio:
+        warnings.append(f"the area-weighted 1%/99% scale ratio {measured['mu_ratio_p1_p99_area']:.3f} "
+                        f"is below the target {target_ratio} with {len(S)} cones (max_cones={max_cones})")
     if measured['qc_mean'] > QC_WARN:
         warnings.append(f"the map is not conformal enough: qc_mean {measured['qc_mean']:.3f}")
     rep['warnings'] = warnings

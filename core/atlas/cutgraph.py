@@ -303,3 +303,83 @@ def straighten(F, edges, keep):
             E.add(ab)
             changed = True
     return np.array(sorted(E), np.int64).reshape(-1, 2)
+
+
+def through_corner(V, F, edges, corner, start, stop, protect=None):
+    """Make the cut graph ``edges`` (k,2) pass *through* the leaf ``corner`` (a negative cone whose
+    single wedge exceeds 2*pi) by a new branch, keeping a tree of the same topology.
+
+    The branch leaves ``corner`` by ``start`` (its neighbour in the middle of the wedge) and follows
+    the shortest path off the cut to the nearest cut vertex ``x`` that is not on one of ``corner``'s
+    own branches (up to the next stop or branch point).
+    That closes one cycle (the branch plus the cut's path from ``x`` back to ``corner``); the cycle
+    is opened again by removing its longest segment between two ``stop`` vertices ((n,) bool: cones,
+    boundary) or branch points, except the segments that end at ``corner`` and those ending at a
+    ``protect`` vertex ((n,) bool: negative cones) of degree 2, and dangling ends are pruned (``keep``
+    = ``stop``). Returns the new edges (k',2), or None if no such branch exists. The caller checks that
+    the surface still opens into a disk (``is_disk``)."""
+    n = len(V)
+    edges = np.unique(np.sort(np.asarray(edges, np.int64).reshape(-1, 2), 1), axis=0)
+    E, w, _ = edge_list(V, F)
+    on_cut = np.zeros(n, bool)
+    on_cut[edges.ravel()] = True
+    if on_cut[start]:
+        return None
+    own = np.zeros(n, bool)                                # corner and its branches up to the
+    own[corner] = True                                     # next cone, boundary or branch point
+    deg = np.bincount(edges.ravel(), minlength=n)
+    for e in edges[(edges == corner).any(1)]:
+        prev, v = int(corner), int(e[0] if e[1] == corner else e[1])
+        while True:
+            own[v] = True
+            if stop[v] or deg[v] != 2:
+                break
+            nxt = [int(x) for x in edges[(edges == v).any(1)].ravel() if x != v and x != prev]
+            if not nxt:
+                break
+            prev, v = v, nxt[0]
+    # off-cut vertices, plus steps onto allowed cut vertices (which end a path: they are sinks)
+    ok = ~(own[E[:, 0]] | own[E[:, 1]]) & ~(on_cut[E[:, 0]] & on_cut[E[:, 1]])
+    dist, pred = dijkstra(_weighted(E[ok], w[ok], n), directed=False, indices=int(start),
+                          return_predecessors=True)
+    target = on_cut & ~own & np.isfinite(dist)
+    if not target.any():
+        return None
+    x = int(np.argmin(np.where(target, dist, np.inf)))
+    path = [x]
+    while pred[path[-1]] >= 0:
+        path.append(int(pred[path[-1]]))
+    if path[-1] != start or any(on_cut[v] for v in path[1:]):
+        return None                                         # the path crossed the cut: give up
+    branch = [(min(a, b), max(a, b)) for a, b in zip(path[:-1], path[1:])]
+    branch.append((min(int(corner), int(start)), max(int(corner), int(start))))
+    # the cut's own path from x to corner (breadth first in the cut graph)
+    adj = sp.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]],
+                                                   np.r_[edges[:, 1], edges[:, 0]])), shape=(n, n)).tocsr()
+    from scipy.sparse.csgraph import breadth_first_order
+    _, pr = breadth_first_order(adj, x, directed=False, return_predecessors=True)
+    if pr[corner] < 0 and corner != x:
+        return None
+    cyc = [int(corner)]
+    while cyc[-1] != x:
+        cyc.append(int(pr[cyc[-1]]))
+    new = np.unique(np.r_[edges, np.array(branch, np.int64)], axis=0)
+    deg = np.bincount(new.ravel(), minlength=n)
+    # segments of the cut's path between stops / branch points
+    marks = [i for i, v in enumerate(cyc) if i == 0 or i == len(cyc) - 1 or stop[v] or deg[v] != 2]
+    segs = []
+    for i0, i1 in zip(marks[:-1], marks[1:]):
+        a, b = cyc[i0], cyc[i1]
+        if a == corner or b == corner:
+            continue
+        if protect is not None and any(protect[v] and deg[v] <= 2 for v in (a, b)):
+            continue
+        seg = cyc[i0:i1 + 1]
+        length = float(np.linalg.norm(np.diff(V[seg], axis=0), axis=1).sum())
+        segs.append((length, seg))
+    if not segs:
+        return None
+    _, seg = max(segs, key=lambda t: t[0])
+    drop = {(min(a, b), max(a, b)) for a, b in zip(seg[:-1], seg[1:])}
+    kept = np.array([e for e in map(tuple, new.tolist()) if e not in drop], np.int64).reshape(-1, 2)
+    return prune(kept, stop, n)
