@@ -47,7 +47,7 @@ from ..mesh.geometry import face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
-MU_MODES = ('vertex', 'face')
+MU_MODES = ('metric', 'vertex', 'face')
 GRID_MIN, GRID_MAX = 64, 4096
 GRID_AUTO_MIN = 256          # the automatic grid never goes below this (nodes along the longer side)
 GRID_AUTO_MAX = 4096         # nor above this; a warning says when the error target needs more
@@ -57,6 +57,7 @@ RIM = 1
 # everywhere in core.geodesic). The sweep's second-order stencil is less accurate on strongly curved
 # fronts than fast marching's, so it starts from a larger disk, SWEEP_SEED_RADIUS (docs/geodesic.md).
 SEED_RADIUS = 24.0
+METRIC_PASSES = 2    # mu_mode 'metric': marches with the exact metric after the isotropic first one
 SWEEP_SEED_RADIUS = 36.0
 
 
@@ -75,6 +76,62 @@ def face_mu(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndarray:
                              "geodesic distances need a fold-free map (flatten again, or use "
                              "boundary 'area' or 'uniform')", 'degenerate', 'area_boundary')
     return np.sqrt(np.abs(a) / A)
+
+
+def face_metric_inverse(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """The inverse of each triangle's pulled-back metric, (m,3) as ``(a, b, c)`` of the symmetric 2x2
+    ``G^-1 = [[a, b], [b, c]]`` (UV units squared per surface unit squared).
+
+    The map ``uv`` (n,2) is affine on each triangle of ``F`` (m,3), so a UV displacement ``du`` has the
+    surface length ``sqrt(du^T G du)`` with a constant ``G = J^T J`` per triangle (``J`` (3,2) the
+    differential of the inverse map, UV to 3D). The surface eikonal ``|grad_X T| = 1`` becomes
+    ``grad_uv T^T G^-1 grad_uv T = 1`` (docs/math.md, "Geodesic distance on the conformal plane"); for an
+    exactly conformal triangle ``G^-1 = mu^2 I``. With ``E3`` (3,2) the 3D edge vectors and ``E2`` (2,2)
+    the UV ones, ``G^-1 = E2 (E3^T E3)^-1 E2^T``."""
+    X = V[F]
+    U = uv[F]
+    e1, e2 = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
+    g11, g12, g22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    det = g11 * g22 - g12 * g12
+    i11, i12, i22 = g22 / det, -g12 / det, g11 / det                  # (E3^T E3)^-1
+    p = U[:, 1] - U[:, 0]                                              # E2 columns
+    q = U[:, 2] - U[:, 0]
+    # E2 K E2^T with E2 = [p q] (columns): sum_kl E2[:,k] K_kl E2[:,l]
+    a = i11 * p[:, 0] ** 2 + 2 * i12 * p[:, 0] * q[:, 0] + i22 * q[:, 0] ** 2
+    b = i11 * p[:, 0] * p[:, 1] + i12 * (p[:, 0] * q[:, 1] + q[:, 0] * p[:, 1]) + i22 * q[:, 0] * q[:, 1]
+    c = i11 * p[:, 1] ** 2 + 2 * i12 * p[:, 1] * q[:, 1] + i22 * q[:, 1] ** 2
+    return np.stack([a, b, c], 1)
+
+
+def directional_mu(T, valid, face, ginv):
+    """The speed (ny, nx) that makes the isotropic eikonal ``|grad T| = 1 / mu`` agree with the
+    anisotropic one ``grad T^T G^-1 grad T = 1`` for the gradient direction ``g`` of a travel-time
+    field ``T`` (ny, nx): ``mu = sqrt(g^T G^-1 g)``, ``G^-1`` (m,3) per triangle (``face_metric_inverse``)
+    at each node's triangle ``face`` (ny, nx). The gradient is a central difference where both
+    neighbours are finite and ``valid``, else one-sided; nodes with no usable neighbour on either axis
+    get the isotropic ``sqrt(sqrt(det G^-1))``. NaN-free; 1 at unused nodes."""
+    Tf = np.where(valid & np.isfinite(T), T, np.nan)
+    pad = np.pad(Tf, 1, constant_values=np.nan)
+    c = pad[1:-1, 1:-1]
+
+    def diff(lo, hi):
+        both = np.isfinite(lo) & np.isfinite(hi)
+        d = np.where(both, 0.5 * (hi - lo), np.nan)
+        d = np.where(~both & np.isfinite(hi), hi - c, d)
+        return np.where(~both & ~np.isfinite(hi) & np.isfinite(lo), c - lo, d)
+
+    gx = diff(pad[1:-1, :-2], pad[1:-1, 2:])
+    gy = diff(pad[:-2, 1:-1], pad[2:, 1:-1])
+    nrm = np.hypot(gx, gy)
+    f = np.where(face >= 0, face, 0)
+    a, b, cc = ginv[f, 0], ginv[f, 1], ginv[f, 2]
+    iso = np.sqrt(np.sqrt(np.maximum(a * cc - b * b, 1e-300)))
+    ok = np.isfinite(nrm) & (nrm > 0)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        x, y = gx / nrm, gy / nrm
+        mu = np.sqrt(np.maximum(a * x * x + 2 * b * x * y + cc * y * y, 1e-300))
+    mu = np.where(ok, mu, iso)
+    return np.where(valid & (face >= 0), mu, 1.0)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -593,12 +650,13 @@ class Chart:
     ``cell`` the mean grid cell in surface units; ``error_estimate`` (mean relative, at the typical
     distance; a query re-estimates it from its own distances)."""
 
-    def __init__(self, V, F, uv, verts, faces, grid, target):
+    def __init__(self, V, F, uv, verts, faces, grid, target, mu_mode='metric'):
         self.verts, self.faces, self.V, self.F = verts, faces, V, F
         self.uv = uv = align_uv(uv)
         self.mu_face = mu_f = face_mu(V, F, uv)
         self.area = face_areas(V, F)
-        self.spread = mu_spread(F, mu_f, self.area)
+        # the mesh term of the error: none when marching with the exact per-triangle metric
+        self.spread = 0.0 if mu_mode == 'metric' else mu_spread(F, mu_f, self.area)
         self.reflex = reflex_turning(uv, F)
         self.limit = None
         if grid is None:
@@ -612,11 +670,12 @@ class Chart:
         uv, F, mu_f = self.uv, self.F, self.mu_face
         G = Grid(uv, self.size).rasterise(uv, F)
         self.valid = valid = G.rim(RIM)
-        if mu_mode == 'vertex':
+        if mu_mode in ('vertex', 'metric'):
             mu = G.interpolate(uv, F, vertex_mu(F, mu_f, self.area, len(self.V)))
         else:
             mu = G.interpolate(uv, F, face_values=mu_f)
         self.mu = np.where(valid, np.clip(mu, mu_f.min(), mu_f.max()), 1.0)
+        self.ginv = face_metric_inverse(self.V, F, uv) if mu_mode == 'metric' else None
         self.march_on = valid & ~bridging_rim(G, F, valid)
         self.inv_mu = 1.0 / self.mu
         self.grid = G
@@ -702,7 +761,7 @@ class GeodesicSolver:
     rasterise})."""
 
     def __init__(self, V: np.ndarray, F: np.ndarray, uv: np.ndarray | None = None, boundary: str = 'uniform',
-                 grid: int | None = None, solver: str = 'auto', mu_mode: str = 'vertex',
+                 grid: int | None = None, solver: str = 'auto', mu_mode: str = 'metric',
                  seams: np.ndarray | None = None, error_target: float = ERROR_TARGET, progress=None):
         say = progress or (lambda f, msg: None)
         t0 = time.perf_counter()
@@ -767,7 +826,7 @@ class GeodesicSolver:
             verts, Fl = np.unique(Fg, return_inverse=True)
             Fl = Fl.reshape(-1, 3)
             try:
-                ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, self.error_target)
+                ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, self.error_target, mu_mode)
             except ConformalError as exc:
                 raise (exc.with_context(f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles)")
                        if len(cuts) else exc) from None
@@ -966,6 +1025,17 @@ class GeodesicSolver:
             # parts that are far apart on the surface); those get extrapolated values for sampling
             Tm, used = eikonal_march(Tloc, seed & march_on, phi, mu, ~march_on, G.h, self.solver)
             Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else np.where(seed, Tloc, Tm)
+            for _ in range(METRIC_PASSES if ch.ginv is not None else 0):
+                # march again with the exact per-triangle metric, for the gradient direction of the
+                # previous pass (docs/geodesic.md, "Exact metric")
+                sp_ = directional_mu(np.where(march_on, Tg, np.inf), march_on, G.face, ch.ginv)
+                phi2 = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * sp_, h_far)
+                phi2 = np.minimum(phi2, h_far)
+                phi2 = np.where(seed, np.minimum(phi2, -1e-9 * G.h), np.maximum(phi2, 1e-9 * G.h))
+                if calibrate:
+                    phi2 = calibrate_phi(phi2, valid, G.h)
+                Tm, used = eikonal_march(Tloc, seed & march_on, phi2, sp_, ~march_on, G.h, self.solver)
+                Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else np.where(seed, Tloc, Tm)
             if rim.any():
                 Tg = np.where(rim & ~seed, extrapolate_rim(Tg, march_on, rim, G.h, inv_mu), Tg)
             np.minimum(T, Tg, out=T)
@@ -1027,7 +1097,7 @@ class GeodesicSolver:
 
 def geodesic_distance(V: np.ndarray, F: np.ndarray, sources=None, points=None, uv: np.ndarray | None = None,
                       boundary: str = 'uniform', grid: int | None = None, solver: str = 'auto',
-                      mu_mode: str = 'vertex', source_radius: float | None = None, calibrate: bool = True,
+                      mu_mode: str = 'metric', source_radius: float | None = None, calibrate: bool = True,
                       progress=None, seams: np.ndarray | None = None, clamp: bool = True,
                       error_target: float = ERROR_TARGET) -> tuple[np.ndarray, dict]:
     """Geodesic distances from a set of sources to every vertex, by fast marching on the conformal
