@@ -34,7 +34,13 @@ A query (``GeodesicSolver.distance``):
 5. March with scikit-fmm ``travel_time(order=2)`` or, without scikit-fmm, the numpy fast sweeping
    solver of ``core.geodesic.eikonal``, without the rim nodes that bridge gaps of the domain
    (``bridging_rim``; they get extrapolated times, ``extrapolate_rim``). Sources whose ``mu`` differ
-   by more than a factor 2 march separately and the minimum is taken.
+   by more than a factor 2 march separately and the minimum is taken. With ``mu_mode='metric'`` (the
+   default) the march is repeated with the exact metric of the map: the map is affine on each
+   triangle, so the surface length of a UV step ``du`` is ``sqrt(du^T G du)`` with one constant
+   ``G`` (2x2) per triangle (``face_metric_inverse``); for the gradient direction ``g`` of the
+   previous march the anisotropic eikonal equals the isotropic one with speed
+   ``sqrt(g^T G^-1 g)`` (``directional_mu``). This removes the mesh's floor (the smooth per-vertex
+   ``mu`` against the per-triangle, slightly anisotropic metric): the error then falls with the grid.
 6. Sample the travel time back to the vertices bilinearly, then clamp each vertex between two exact
    bounds: the 3D distance to the nearest source (below) and the shortest edge path (Dijkstra, above).
 """
@@ -676,7 +682,16 @@ class Chart:
             mu = G.interpolate(uv, F, face_values=mu_f)
         self.mu = np.where(valid, np.clip(mu, mu_f.min(), mu_f.max()), 1.0)
         self.ginv = face_metric_inverse(self.V, F, uv) if mu_mode == 'metric' else None
+        if self.ginv is not None:
+            # the re-marches change nothing where every triangle is conformal and mu is the same on all
+            # of them (an isometric map of a planar mesh): skip them there
+            a, b, c = self.ginv.T
+            lv = np.log(vertex_mu(F, mu_f, self.area, len(self.V)))
+            dev = (np.abs(a - c) + 2 * np.abs(b)) / (a + c) + np.abs(lv[F] - np.log(mu_f)[:, None]).max(1)
+            if float(dev.max()) < 1e-6:
+                self.ginv = None
         self.march_on = valid & ~bridging_rim(G, F, valid)
+        self.metric_passes = METRIC_PASSES if self.ginv is not None else 0
         self.inv_mu = 1.0 / self.mu
         self.grid = G
         self.P = G.coords(uv)
@@ -751,8 +766,11 @@ class GeodesicSolver:
     use sphere mode (``core.sphere.geodesic``) or mark seams. ``grid``: nodes along the longer UV
     side of every chart (64..4096), None: per chart from ``error_target`` (``default_grid_for_target``).
     ``solver``: 'auto' (scikit-fmm if installed, else the numpy sweep), 'skfmm' or 'sweep'.
-    ``mu_mode``: 'vertex' (per-vertex mu interpolated linearly, default) or 'face' (piecewise
-    constant). ``error_target``: the estimated mean relative error to reach (default 1e-3); a chart
+    ``mu_mode``: 'metric' (default: a first march with the per-vertex mu interpolated linearly, then
+    ``METRIC_PASSES`` re-marches with the exact per-triangle metric of the map for the previous
+    march's gradient directions, ``directional_mu``; skipped on charts where the map is an exact
+    similarity), 'vertex' (the first march only) or 'face' (piecewise constant per-triangle mu).
+    ``error_target``: the estimated mean relative error to reach (default 1e-3); a chart
     whose estimate stays above it gets a warning in every report. ``progress(fraction, message)``:
     optional callback. Raises ``ConformalError``.
 
@@ -904,7 +922,8 @@ class GeodesicSolver:
 
         Returns ``(dist, report)``: ``dist`` (n,) float64: NaN at vertices in no triangle, inf on
         islands without a source. ``report``: grid [ny, nx] (the largest chart), cell (UV units),
-        masked_fraction, solver, sources, seed_radius (cells), marches, islands, islands_reached,
+        masked_fraction, solver, sources, seed_radius (cells), marches, metric_passes, islands,
+        islands_reached,
         error_estimate (mean relative, dimensionless), error_target, clamped {below_euclid,
         above_edges} (vertex counts), filled_from_edges (vertices no grid node reached, given edge
         paths from their neighbours), warnings (list of str), seconds {rasterise, solve, sample,
@@ -984,7 +1003,8 @@ class GeodesicSolver:
         report.update({
             'grid': [ny, nx], 'cell': G.grid.h, 'masked_fraction': float(1 - G.grid.inside.mean()),
             'solver': self.solver, 'sources': int(len(X_src)), 'seed_radius': float(min(radii)),
-            'marches': marches, 'islands': len(self.charts), 'islands_reached': reached,
+            'marches': marches, 'metric_passes': max(self.charts[c].metric_passes for c in active),
+            'islands': len(self.charts), 'islands_reached': reached,
             'error_estimate': est, 'clamped': clamped, 'filled_from_edges': filled, 'warnings': warnings,
             'seconds': {k: round(v, 4) for k, v in seconds.items()},
         })
@@ -1025,7 +1045,7 @@ class GeodesicSolver:
             # parts that are far apart on the surface); those get extrapolated values for sampling
             Tm, used = eikonal_march(Tloc, seed & march_on, phi, mu, ~march_on, G.h, self.solver)
             Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else np.where(seed, Tloc, Tm)
-            for _ in range(METRIC_PASSES if ch.ginv is not None else 0):
+            for _ in range(ch.metric_passes):
                 # march again with the exact per-triangle metric, for the gradient direction of the
                 # previous pass (docs/geodesic.md, "Exact metric")
                 sp_ = directional_mu(np.where(march_on, Tg, np.inf), march_on, G.face, ch.ginv)
@@ -1044,7 +1064,7 @@ class GeodesicSolver:
         T[~valid] = np.inf
         dist = bilinear(np.where(valid, T, np.nan), ch.P, valid)
         dist = np.fmin(dist, near)
-        return dist, radius, len(groups)
+        return dist, radius, len(groups) * (1 + ch.metric_passes)
 
     def _fill_unreached(self, dist_s, charts):
         """Vertices of the ``charts`` (indices) that no grid node reached (UV slivers thinner than a
