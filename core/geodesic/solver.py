@@ -63,6 +63,7 @@ RIM = 1
 # everywhere in core.geodesic). The sweep's second-order stencil is less accurate on strongly curved
 # fronts than fast marching's, so it starts from a larger disk, SWEEP_SEED_RADIUS (docs/geodesic.md).
 SEED_RADIUS = 24.0
+UNRESOLVED = 2.0     # a triangle whose surface cell h / mu exceeds this times its mean edge is not resolved
 METRIC_PASSES = 2    # mu_mode 'metric': marches with the exact metric after the isotropic first one
 SWEEP_SEED_RADIUS = 36.0
 
@@ -138,6 +139,70 @@ def directional_mu(T, valid, face, ginv):
         mu = np.sqrt(np.maximum(a * x * x + 2 * b * x * y + cc * y * y, 1e-300))
     mu = np.where(ok, mu, iso)
     return np.where(valid & (face >= 0), mu, 1.0)
+
+
+# --------------------------------------------------------------------------------------------------
+# on-mesh fast marching where the grid does not resolve the surface
+class MeshRelax:
+    """Fast marching on the mesh itself (planar-front triangle updates), restricted to a set of free
+    vertices, relaxed in place: used where the grid's surface cell ``h / mu`` is larger than the
+    triangles (docs/geodesic.md, "Under-resolved regions").
+
+    For a triangle with corners ``C``, ``A``, ``B`` and known times ``T_A``, ``T_B``, the update of
+    ``C`` is the time of the plane front through ``A`` and ``B`` with unit surface gradient: with
+    the Gram matrix ``M`` of the edge vectors ``e_A = A - C``, ``e_B = B - C`` (3D, mesh units),
+    ``Q = M^-1`` and ``r = (T_A, T_B)``, ``t`` is the larger root of
+    ``(1^T Q 1) t^2 - 2 (1^T Q r) t + r^T Q r - 1 = 0``, accepted when the front reaches ``C`` from
+    inside the triangle (both coefficients of ``Q (r - t 1)`` non-positive), else the edge updates
+    ``T_A + |e_A|``, ``T_B + |e_B|``. Every (triangle, corner) update of the free vertices runs at
+    once (numpy), repeated until nothing decreases: the monotone scheme's fixed point, which
+    sequential fast marching reaches in one ordered pass.
+
+    ``V`` (k,3), ``F`` (m,3) one chart's mesh; ``faces`` (q,) the triangles with a free corner."""
+
+    def __init__(self, V, F, faces):
+        self.faces = faces
+        c, a, b = [], [], []
+        for k in range(3):
+            c.append(F[faces, k])
+            a.append(F[faces, (k + 1) % 3])
+            b.append(F[faces, (k + 2) % 3])
+        self.c, self.a, self.b = np.concatenate(c), np.concatenate(a), np.concatenate(b)
+        eA, eB = V[self.a] - V[self.c], V[self.b] - V[self.c]
+        m11, m12, m22 = (eA * eA).sum(1), (eA * eB).sum(1), (eB * eB).sum(1)
+        det = np.maximum(m11 * m22 - m12 * m12, 1e-300)
+        self.q11, self.q12, self.q22 = m22 / det, -m12 / det, m11 / det
+        self.la, self.lb = np.sqrt(m11), np.sqrt(m22)
+
+    def relax(self, T, free, max_iter=100_000):
+        """Lower ``T`` (k,) at the ``free`` (k,) bool vertices to the fixed point of the triangle
+        updates (the others are boundary data); ``T`` at free vertices should start at inf. Returns
+        the number of rounds."""
+        q11, q12, q22 = self.q11, self.q12, self.q22
+        s1 = q11 + 2 * q12 + q22                                   # 1^T Q 1
+        target = free[self.c]
+        c, a, b = self.c[target], self.a[target], self.b[target]
+        q11, q12, q22, s1 = q11[target], q12[target], q22[target], s1[target]
+        la, lb = self.la[target], self.lb[target]
+        for it in range(1, max_iter + 1):
+            ta, tb = T[a], T[b]
+            with np.errstate(invalid='ignore', over='ignore'):
+                s2 = (q11 + q12) * ta + (q12 + q22) * tb           # 1^T Q r
+                s3 = q11 * ta * ta + 2 * q12 * ta * tb + q22 * tb * tb - 1.0
+                disc = s2 * s2 - s1 * s3
+                t = (s2 + np.sqrt(np.maximum(disc, 0.0))) / s1
+                al = q11 * (ta - t) + q12 * (tb - t)
+                be = q12 * (ta - t) + q22 * (tb - t)
+                ok = (np.isfinite(ta) & np.isfinite(tb) & (disc >= 0) & (al <= 0) & (be <= 0)
+                      & (t >= np.maximum(ta, tb)))
+            cand = np.minimum(np.where(ok, t, np.inf), np.minimum(ta + la, tb + lb))
+            new = T.copy()
+            np.minimum.at(new, c, cand)
+            changed = new < T * (1 - 1e-13) - 1e-300
+            T[:] = new
+            if not changed.any():
+                return it
+        return max_iter
 
 
 # --------------------------------------------------------------------------------------------------
@@ -267,9 +332,10 @@ def align_uv(uv, used=None):
     return uv @ R
 
 
-def bilinear(field, pts, valid=None):
+def bilinear(field, pts, valid=None, corner_ok=None):
     """Bilinear samples (k,) of ``field`` (ny, nx) at continuous node coordinates ``pts`` (k,2)
-    (column, row). Invalid nodes (``valid`` False or non-finite values) are left out and the weights
+    (column, row). Invalid nodes (``valid`` False or non-finite values, or ``corner_ok`` (k,4) False
+    for that point's corner in the order (0,0), (0,1), (1,0), (1,1)) are left out and the weights
     renormalised; a point with no valid corner gets NaN."""
     ny, nx = field.shape
     x = np.clip(pts[:, 0], 0, nx - 1 - 1e-9)
@@ -278,12 +344,14 @@ def bilinear(field, pts, valid=None):
     fx, fy = x - j, y - i
     num = np.zeros(len(pts))
     den = np.zeros(len(pts))
-    for di, dj, w in ((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)),
-                      (1, 0, (1 - fx) * fy), (1, 1, fx * fy)):
+    for q, (di, dj, w) in enumerate(((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)),
+                                     (1, 0, (1 - fx) * fy), (1, 1, fx * fy))):
         v = field[i + di, j + dj]
         ok = np.isfinite(v)
         if valid is not None:
             ok &= valid[i + di, j + dj]
+        if corner_ok is not None:
+            ok &= corner_ok[:, q]
         num += np.where(ok, w * np.where(ok, v, 0.0), 0.0)
         den += np.where(ok, w, 0.0)
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -514,6 +582,66 @@ def bridging_rim(G, F, valid):
     return out
 
 
+def bridging_inside(G, F, fine):
+    """(ny, nx) bool: inside nodes that face a node of another part of the domain across a gap
+    narrower than a cell (a 4-neighbour whose triangle shares no vertex with the node's own), where
+    both triangles are ``fine`` (m,) bool (the cell is well below their edges, so neighbouring
+    nodes of one part lie in the same or touching triangles). Both nodes of such a pair are left
+    out of the march, so that the front does not jump the gap. ``G`` a rasterised ``Grid``, ``F``
+    (m,3) the chart's triangles."""
+    face, inside = G.face, G.inside
+    out = np.zeros(face.shape, bool)
+    for a, b in (((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+                 ((slice(None, -1), slice(None)), (slice(1, None), slice(None)))):
+        fa, fb = face[a], face[b]
+        both = inside[a] & inside[b] & (fa != fb)
+        ii, jj = np.nonzero(both)
+        if not len(ii):
+            continue
+        ta, tb = fa[ii, jj], fb[ii, jj]
+        use = fine[ta] & fine[tb]
+        share = (F[ta][:, :, None] == F[tb][:, None, :]).any((1, 2))
+        gap = use & ~share
+        for sl in (a, b):
+            sub = out[sl]
+            sub[ii[gap], jj[gap]] = True
+    return out
+
+
+def sample_corners(G, F, P, fine):
+    """(k,4) bool: which of the four bilinear corner nodes of each vertex (node coordinates ``P``
+    (k,2)) may give it a value. Where the vertex's triangles are ``fine`` (m,) (cells well below their
+    edges), a corner node must lie in a triangle with a corner in the vertex's one-ring: a node
+    across a narrow gap of the domain (two sides of a hole, a notch), or a rim node extended from the
+    other side, is no sample of this side. Elsewhere every corner may. ``G`` a rasterised ``Grid``
+    with its rim, ``F`` (m,3) the chart's triangles."""
+    import scipy.sparse as sp
+    k = len(P)
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    A = sp.coo_matrix((np.ones(2 * len(E) + k, bool), (np.r_[E[:, 0], E[:, 1], np.arange(k)],
+                                                       np.r_[E[:, 1], E[:, 0], np.arange(k)])),
+                      shape=(k, k)).tocsr()
+    vfine = np.zeros(k, bool)
+    vfine[F[fine].ravel()] = True
+    ny, nx = G.face.shape
+    x = np.clip(P[:, 0], 0, nx - 1 - 1e-9)
+    y = np.clip(P[:, 1], 0, ny - 1 - 1e-9)
+    j, i = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    out = np.ones((k, 4), bool)
+    idx = np.flatnonzero(vfine)
+    if not len(idx):
+        return out
+    for q, (di, dj) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
+        f = G.face[i[idx] + di, j[idx] + dj]
+        has = f >= 0
+        near = np.zeros(len(idx), bool)
+        for c in range(3):
+            cols = F[np.where(has, f, 0), c]
+            near |= np.asarray(A[idx, cols]).ravel().astype(bool)
+        out[idx, q] = ~has | near
+    return out
+
+
 def extrapolate_rim(T, inside, rim, h, inv_mu):
     """Travel times at the rim nodes (outside the domain, next to it) from the inside ones, for
     sampling boundary vertices: per axis direction with two inside nodes ``2 T1 - T2`` (linear
@@ -563,6 +691,7 @@ def _groups(mu_s):
 ERR_GRID_C0 = 0.02     # grid term: (C0 + C1 min(reflex, REFLEX_CAP)) * mean surface cell / median distance
 ERR_GRID_C1 = 0.05
 REFLEX_CAP = 6.0
+ERR_RELAX = 0.005      # on-mesh term: ERR_RELAX * area fraction of the under-resolved triangles
 ERR_MESH = 0.1         # mesh term: ERR_MESH * mu_spread (area-weighted mean of the per-triangle spread)
 TYPICAL_DISTANCE = 0.35  # before a query, the median distance is taken as this times the 3D bbox diagonal
 NODE_BUDGET = 4096 * 4096  # automatic grids of all islands together use at most this many nodes
@@ -592,10 +721,14 @@ def mu_spread(F: np.ndarray, mu_face: np.ndarray, area: np.ndarray) -> float:
     return float((area * s).sum() / area.sum())
 
 
-def surface_cell(mu_face: np.ndarray, area: np.ndarray, h: float) -> float:
+def surface_cell(mu_face: np.ndarray, area: np.ndarray, h: float, where: np.ndarray | None = None) -> float:
     """The grid's mean cell size in surface units (mesh units): the area-weighted (``area`` (m,)) mean
-    over the triangles of ``h / mu_T`` for a grid spacing ``h`` (UV units) and the realised scale
-    ``mu_face`` (m,) (UV units per surface unit)."""
+    over the triangles (those of ``where`` (m,) bool, default all) of ``h / mu_T`` for a grid spacing
+    ``h`` (UV units) and the realised scale ``mu_face`` (m,) (UV units per surface unit)."""
+    if where is not None:
+        if not where.any():
+            return 0.0
+        mu_face, area = mu_face[where], area[where]
     return float((area * (h / mu_face)).sum() / area.sum())
 
 
@@ -604,12 +737,14 @@ def grid_coefficient(reflex: float) -> float:
     return ERR_GRID_C0 + ERR_GRID_C1 * min(reflex, REFLEX_CAP)
 
 
-def error_estimate(cell: float, distance: float, spread: float, reflex: float) -> float:
+def error_estimate(cell: float, distance: float, spread: float, reflex: float, free: float = 0.0) -> float:
     """Estimated mean relative error (dimensionless) of the distances on a chart whose mean surface
-    cell is ``cell`` (``surface_cell``, mesh units), for a query whose median distance is ``distance``
-    (mesh units), on a map with ``mu_spread`` ``spread`` over a domain with ``reflex_turning``
-    ``reflex``: ``grid_coefficient(reflex) * cell / distance + ERR_MESH * spread``."""
-    return float(grid_coefficient(reflex) * cell / max(distance, 1e-300) + ERR_MESH * spread)
+    cell is ``cell`` (``surface_cell`` over the resolved triangles, mesh units), for a query whose
+    median distance is ``distance`` (mesh units), on a map with ``mu_spread`` ``spread`` over a domain
+    with ``reflex_turning`` ``reflex``, with the area fraction ``free`` under-resolved (on-mesh fast
+    marching): ``grid_coefficient(reflex) * cell / distance + ERR_MESH * spread + ERR_RELAX * free``."""
+    return float(grid_coefficient(reflex) * cell / max(distance, 1e-300) + ERR_MESH * spread
+                 + ERR_RELAX * free)
 
 
 def typical_distance(V: np.ndarray) -> float:
@@ -621,9 +756,10 @@ def typical_distance(V: np.ndarray) -> float:
 def default_grid_for_target(V, F, uv, mu_face, spread, reflex, target=ERROR_TARGET, pad=2):
     """Automatic grid size (nodes along the longer UV side) for one chart, ``V`` (k,3), ``F`` (mi,3),
     ``uv`` (k,2), ``mu_face`` (mi,): the smallest multiple of 64 whose ``error_estimate`` (at the
-    ``typical_distance``) meets ``target``, at least ``default_grid`` (8 nodes per mean UV edge) and
+    ``typical_distance``; the grid term over the triangles that grid resolves, the others counted by
+    the on-mesh term) meets ``target``, at least ``default_grid`` (8 nodes per mean UV edge) and
     ``GRID_AUTO_MIN``, at most ``GRID_AUTO_MAX``. When the mesh term alone uses up the target, the grid
-    term is only brought to half the mesh term (a finer grid would not help). Returns (grid, limit):
+    terms are only brought to half the mesh term (a finer grid would not help). Returns (grid, limit):
     ``limit`` None when the target is met, 'cap' when the cap stops it, 'mesh' when the mesh does."""
     area = face_areas(V, F)
     ext = float(np.ptp(uv[np.unique(F)], axis=0).max())
@@ -632,13 +768,27 @@ def default_grid_for_target(V, F, uv, mu_face, spread, reflex, target=ERROR_TARG
     room, limit = target - floor, None
     if room < 0.5 * floor:
         room, limit = 0.5 * floor, 'mesh'
-    # cell(grid) = cell_unit / (grid - 1 - 2 pad), as the Grid's spacing
-    cell_unit = surface_cell(mu_face, area, ext)
-    g = 1 + 2 * pad + grid_coefficient(reflex) * cell_unit / (max(room, 1e-12) * typical_distance(V))
-    g = int(64 * np.ceil(max(g, base) / 64))
-    if g > GRID_AUTO_MAX:
-        return GRID_AUTO_MAX, limit or 'cap'
-    return g, limit
+    edge = mean_edges(V, F)
+    dist = typical_distance(V)
+    for g in range(int(64 * np.ceil(base / 64)), GRID_AUTO_MAX + 1, 64):
+        h = ext / (g - 1 - 2 * pad)                     # the Grid's spacing
+        un = unresolved_faces(mu_face, edge, h)
+        est = error_estimate(surface_cell(mu_face, area, h, ~un), dist, 0.0, reflex,
+                             float(area[un].sum() / area.sum()))
+        if est <= room:
+            return g, limit
+    return GRID_AUTO_MAX, limit or 'cap'
+
+
+def mean_edges(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Mean 3D edge length (m,) of each triangle of ``F`` (m,3), mesh units."""
+    return np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean(1)
+
+
+def unresolved_faces(mu_face: np.ndarray, edge: np.ndarray, h: float) -> np.ndarray:
+    """(m,) bool: triangles whose surface cell ``h / mu_T`` is above ``UNRESOLVED`` times their mean
+    edge ``edge`` (m,): the grid does not resolve them, on-mesh fast marching does (``MeshRelax``)."""
+    return (h / mu_face) > UNRESOLVED * edge
 
 
 # --------------------------------------------------------------------------------------------------
@@ -690,13 +840,27 @@ class Chart:
             dev = (np.abs(a - c) + 2 * np.abs(b)) / (a + c) + np.abs(lv[F] - np.log(mu_f)[:, None]).max(1)
             if float(dev.max()) < 1e-6:
                 self.ginv = None
-        self.march_on = valid & ~bridging_rim(G, F, valid)
+        E = mean_edges(self.V, F)
+        fine = (G.h / mu_f) < 0.5 * E
+        self.gap = bridging_inside(G, F, fine)
+        self.corner_ok = sample_corners(G, F, G.coords(uv), fine)
+        self.march_on = valid & ~bridging_rim(G, F, valid) & ~self.gap
         self.metric_passes = METRIC_PASSES if self.ginv is not None else 0
+        # triangles the grid does not resolve (surface cell above UNRESOLVED times their mean edge):
+        # their vertices take on-mesh fast marching from the resolved ones (``MeshRelax``)
+        self.unresolved = unresolved_faces(mu_f, E, G.h)
+        self.free_frac = float(self.area[self.unresolved].sum() / self.area.sum())
+        self.free = None
+        if self.unresolved.any():
+            self.free = np.zeros(len(self.V), bool)
+            self.free[F[self.unresolved].ravel()] = True
+            self.relax = MeshRelax(self.V, F, np.flatnonzero(self.free[F].any(1)))
         self.inv_mu = 1.0 / self.mu
         self.grid = G
         self.P = G.coords(uv)
-        self.cell = surface_cell(mu_f, self.area, G.h)
-        self.error_estimate = error_estimate(self.cell, typical_distance(self.V), self.spread, self.reflex)
+        self.cell = surface_cell(mu_f, self.area, G.h, ~self.unresolved)
+        self.error_estimate = error_estimate(self.cell, typical_distance(self.V), self.spread, self.reflex,
+                                             self.free_frac)
         return self
 
     def node_points(self, ii, jj):
@@ -922,8 +1086,8 @@ class GeodesicSolver:
 
         Returns ``(dist, report)``: ``dist`` (n,) float64: NaN at vertices in no triangle, inf on
         islands without a source. ``report``: grid [ny, nx] (the largest chart), cell (UV units),
-        masked_fraction, solver, sources, seed_radius (cells), marches, metric_passes, islands,
-        islands_reached,
+        masked_fraction, solver, sources, seed_radius (cells), on_mesh (vertices given on-mesh fast
+        marching from the resolved ones: ``MeshRelax``), marches, metric_passes, islands, islands_reached,
         error_estimate (mean relative, dimensionless), error_target, clamped {below_euclid,
         above_edges} (vertex counts), filled_from_edges (vertices no grid node reached, given edge
         paths from their neighbours), warnings (list of str), seconds {rasterise, solve, sample,
@@ -947,6 +1111,7 @@ class GeodesicSolver:
         N = len(self.vert_of)
         dist_s = np.full(N, np.inf)
         marches, radii, reached = 0, [], 0
+        hybrid, hybrid_skipped = 0, 0
         active = np.unique(np.r_[self.chart_of_split[src_split], self.face_island[pf]]).astype(np.int64)
         for k, c in enumerate(active):
             say(0.05 + 0.85 * k / len(active), 'marching')
@@ -958,6 +1123,14 @@ class GeodesicSolver:
             src_faces = np.searchsorted(ch.faces, pf[mine]) if mine.any() else np.zeros(0, np.int64)
             d, r, nm = self._march_chart(ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius,
                                          calibrate)
+            if ch.free is not None:
+                if ch.free[loc].any() or ch.unresolved[src_faces].any():
+                    hybrid_skipped += 1
+                else:
+                    d = np.where(np.isnan(d) & ~ch.free, np.inf, d)
+                    d[ch.free] = np.inf
+                    ch.relax.relax(d, ch.free)
+                    hybrid += int(ch.free.sum())
             dist_s[ch.verts] = d
             marches += nm
             radii.append(r)
@@ -986,9 +1159,13 @@ class GeodesicSolver:
             dc = dist_s[ch.verts]
             dc = dc[np.isfinite(dc) & (dc > 0)]
             ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.spread,
-                                       ch.reflex))
+                                       ch.reflex, ch.free_frac))
         est = max(ests)
         warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w]
+        if hybrid_skipped:
+            warnings.append("a source lies where the grid does not resolve the surface (its cell is larger "
+                            "than the triangles there): distances come from the under-resolved grid; use a "
+                            "larger grid, or a more uniform map (cones, seams)")
         if filled:
             warnings.append(f"{filled} vertices lie in UV slivers thinner than a grid cell: their distances "
                             "are edge paths from their neighbours (an upper bound); use a larger grid")
@@ -1003,7 +1180,8 @@ class GeodesicSolver:
         report.update({
             'grid': [ny, nx], 'cell': G.grid.h, 'masked_fraction': float(1 - G.grid.inside.mean()),
             'solver': self.solver, 'sources': int(len(X_src)), 'seed_radius': float(min(radii)),
-            'marches': marches, 'metric_passes': max(self.charts[c].metric_passes for c in active),
+            'on_mesh': hybrid, 'marches': marches,
+            'metric_passes': max(self.charts[c].metric_passes for c in active),
             'islands': len(self.charts), 'islands_reached': reached,
             'error_estimate': est, 'clamped': clamped, 'filled_from_edges': filled, 'warnings': warnings,
             'seconds': {k: round(v, 4) for k, v in seconds.items()},
@@ -1062,7 +1240,8 @@ class GeodesicSolver:
             nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=ch.P, domain=march_on)
             near = np.where(nv <= tau, np.fmin(near, nv), near)
         T[~valid] = np.inf
-        dist = bilinear(np.where(valid, T, np.nan), ch.P, valid)
+        sample = valid & ~ch.gap               # nodes that face a gap are no sample of either side
+        dist = bilinear(np.where(sample, T, np.nan), ch.P, sample, ch.corner_ok)
         dist = np.fmin(dist, near)
         return dist, radius, len(groups) * (1 + ch.metric_passes)
 
