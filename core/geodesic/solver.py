@@ -370,7 +370,7 @@ def default_grid(V, F, uv):
 
 
 
-def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None):
+def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None, metric=None):
     """Flat-chart times (``_chart_time``, ``inv_mu`` the grid field 1/mu) from the sources ``S`` (k,2,
     node coordinates). With ``pts`` None:
     on the grid, over a window of ``radius_nodes + 2`` around each source, returns (ny, nx) with inf
@@ -397,7 +397,7 @@ def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None):
             keep = valid[ii, jj]
             ii, jj, src = ii[keep], jj[keep], src[keep]
             P = np.stack([jj, ii], 1).astype(np.float64)
-            np.minimum.at(out, (ii, jj), _chart_time(inv_mu, valid, Sb[src], P, h, domain))
+            np.minimum.at(out, (ii, jj), _chart_time(inv_mu, valid, Sb[src], P, h, domain, metric))
         return out
     # at arbitrary points: nearest sources by a KD-tree
     from scipy.spatial import cKDTree
@@ -405,19 +405,39 @@ def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None):
     T = np.full(len(pts), np.inf)
     near = d <= radius_nodes + 1
     if near.any():
-        T[near] = _chart_time(inv_mu, valid, S[k[near]], pts[near], h, domain)
+        T[near] = _chart_time(inv_mu, valid, S[k[near]], pts[near], h, domain, metric)
     return T
 
 
-def _chart_time(inv_mu, valid, S, P, h, inside=None):
+def _chart_time(inv_mu, valid, S, P, h, inside=None, metric=None):
     """Flat-chart time from ``S`` (k,2) to ``P`` (k,2) (node coordinates): ``|P - S| h`` times the
     mean of ``1/mu`` along the segment (Simpson's rule on the grid field ``inv_mu`` = 1/mu). With
     ``inside`` (ny, nx) bool: inf where the segment leaves the domain (``_visible``), since a straight
-    line across a gap of the domain is no path on the surface."""
+    line across a gap of the domain is no path on the surface. With ``metric`` (``face`` (ny, nx), ``G``
+    (m,3) per triangle): the segment's exact surface length in the per-triangle metric instead."""
     d = np.linalg.norm(P - S, axis=1) * h
     inv = (bilinear(inv_mu, S, valid) + 4 * bilinear(inv_mu, 0.5 * (S + P), valid)
            + bilinear(inv_mu, P, valid)) / 6.0
     T = d * inv
+    if metric is not None and len(S):
+        # the exact surface length of the straight UV segment: the midpoint rule over half-cell
+        # pieces, each in the metric G of the triangle of its nearest node (a path on the surface)
+        face, gmet = metric
+        ny, nx = face.shape
+        D = P - S
+        K = int(np.clip(np.ceil(2 * np.linalg.norm(D, axis=1).max()), 1, 256))
+        L = np.zeros(len(S))
+        for k in range(K):
+            Q = S + ((k + 0.5) / K) * D
+            i = np.clip(np.rint(Q[:, 1]).astype(np.int64), 0, ny - 1)
+            j = np.clip(np.rint(Q[:, 0]).astype(np.int64), 0, nx - 1)
+            f = face[i, j]
+            g = gmet[np.maximum(f, 0)]
+            du = D * (h / K)
+            seg = np.sqrt(g[:, 0] * du[:, 0] ** 2 + 2 * g[:, 1] * du[:, 0] * du[:, 1]
+                          + g[:, 2] * du[:, 1] ** 2)
+            L += np.where(f >= 0, seg, np.nan)
+        T = np.where(np.isfinite(L), L, T)
     if inside is not None:
         T = np.where(_visible(inside, S, P), T, np.inf)
     return T
@@ -846,6 +866,11 @@ class Chart:
         self.corner_ok = sample_corners(G, F, G.coords(uv), fine)
         self.march_on = valid & ~bridging_rim(G, F, valid) & ~self.gap
         self.metric_passes = METRIC_PASSES if self.ginv is not None else 0
+        self.seed_metric = None
+        if self.ginv is not None:
+            a, b, c = self.ginv.T
+            det = a * c - b * b
+            self.seed_metric = (G.face, np.stack([c / det, -b / det, a / det], 1))     # G = (G^-1)^-1
         # triangles the grid does not resolve (surface cell above UNRESOLVED times their mean edge):
         # their vertices take on-mesh fast marching from the resolved ones (``MeshRelax``)
         self.unresolved = unresolved_faces(mu_f, E, G.h)
@@ -1209,7 +1234,7 @@ class GeodesicSolver:
         for idx in groups:
             tau = radius * G.h / float(mu_s[idx].min())
             reach = radius * float(mu_s[idx].max() / mu_s[idx].min())
-            Tloc = _local_times(G, inv_mu, valid, S[idx], reach, domain=march_on)
+            Tloc = _local_times(G, inv_mu, valid, S[idx], reach, domain=march_on, metric=ch.seed_metric)
             Tloc = self._exact_seed(ch, Tloc, tree, X_src, upper, src_local, src_faces)
             h_far = 4.0 * G.h
             phi = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * mu, h_far)
@@ -1237,7 +1262,8 @@ class GeodesicSolver:
             if rim.any():
                 Tg = np.where(rim & ~seed, extrapolate_rim(Tg, march_on, rim, G.h, inv_mu), Tg)
             np.minimum(T, Tg, out=T)
-            nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=ch.P, domain=march_on)
+            nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=ch.P, domain=march_on,
+                              metric=ch.seed_metric)
             near = np.where(nv <= tau, np.fmin(near, nv), near)
         T[~valid] = np.inf
         sample = valid & ~ch.gap               # nodes that face a gap are no sample of either side
