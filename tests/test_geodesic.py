@@ -223,6 +223,42 @@ def test_exact_metric_removes_the_mesh_floor():
     assert err['metric', 1024][0] < 2e-4 and err['metric', 1024][1] < 1e-2, err
 
 
+@pytest.mark.parametrize('direction', [(1.0, 0.0), (0.6, 0.8), (-0.28, 0.96)])
+def test_mesh_relax_is_exact_for_a_plane_front(direction):
+    """On-mesh fast marching (MeshRelax) on equilateral triangles (acute: every direction has an
+    upwind triangle) reproduces a plane front T = n . x exactly from its values on the boundary, with
+    every interior vertex relaxed from inf."""
+    k = 15
+    j, i = np.mgrid[0:k, 0:k]
+    V = np.c_[(i + 0.5 * j).ravel(), (np.sqrt(3) / 2 * j).ravel(), np.zeros(k * k)]
+    q = (j * k + i)[:-1, :-1].ravel()
+    F = np.concatenate([np.c_[q, q + 1, q + k], np.c_[q + 1, q + k + 1, q + k]])
+    exact = V[:, :2] @ np.array(direction)
+    edge = (i == 0) | (j == 0) | (i == k - 1) | (j == k - 1)
+    free = ~edge.ravel()
+    T = np.where(free, np.inf, exact)
+    rounds = geo.MeshRelax(V, F, np.flatnonzero(free[F].any(1))).relax(T, free)
+    assert rounds > 1
+    assert np.abs(T - exact).max() < 1e-9
+
+
+def test_under_resolved_triangles_go_on_mesh():
+    """bump 129 on a 64-node grid: the cell is over twice the edge near the bump's top, those
+    vertices take on-mesh fast marching; a source inside such a region cannot, and the report says
+    so."""
+    V, F = make_surface('bump', 129)
+    ref = np.load(os.path.join(DATA, 'geodesic_ref_bump_129.npz'))
+    gs = geo.GeodesicSolver(V, F, uv=flatten(V, F, boundary='area').uv, grid=64)
+    d, rep = gs.distance([int(ref['sources'][0])])
+    assert rep['on_mesh'] > 0
+    assert not any('does not resolve' in w for w in rep['warnings'])
+    mean, _ = rel_errors(V, d, ref['dist'][0].astype(np.float64), int(ref['sources'][0]))
+    assert mean < 1e-2
+    d, rep = gs.distance([int(ref['sources'][1])])
+    assert rep['on_mesh'] == 0
+    assert any('does not resolve' in w for w in rep['warnings'])
+
+
 def test_default_grid_follows_mesh_resolution():
     sizes = []
     for n in (17, 65, 129):
