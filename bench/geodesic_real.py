@@ -417,7 +417,11 @@ def run_sphere(name, V, F, rows, plot):
     out, tq = {}, []
     for k in SETS:
         t = time.perf_counter()
-        d, rep = sphere_geodesic(V, F, sets[k], S=S)
+        try:
+            d, rep = sphere_geodesic(V, F, sets[k], S=S)
+        except ConformalError as exc:
+            print(f"# {name}: sphere mode failed on the {k} source set ({exc})", flush=True)
+            return
         tq.append(time.perf_counter() - t)
         out[k] = d
     evaluate('ours sphere mode', out, t_setup, float(np.mean(tq)),
