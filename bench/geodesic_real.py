@@ -276,6 +276,8 @@ def run_mesh(name, grids, rows, calib, plot, sphere=False):
     for L in boundary_loops(Fs, len(Vs)):
         bnd[np.asarray(L)] = True
     sets = source_sets(Vs, Fs, part, gs.graph, bnd)
+    # a source vertex on a seam is a source on every side of it (the solver takes all its copies)
+    sets = {k: np.flatnonzero(np.isin(gs.vert_of, gs.vert_of[v])) for k, v in sets.items()}
     D, t_exact = exact_multi(Vs, Fs, sets)
     from scipy.sparse.csgraph import dijkstra
     upper = {k: dijkstra(gs.graph, indices=src, min_only=True) for k, src in sets.items()}
@@ -311,7 +313,7 @@ def run_mesh(name, grids, rows, calib, plot, sphere=False):
         out, tq, est, warn = {}, [], [], 0
         for k in SETS:
             t = time.perf_counter()
-            d, rep = solver.distance([int(x) for x in solver.vert_of[sets[k]]])
+            d, rep = solver.distance(np.unique(solver.vert_of[sets[k]]))
             tq.append(time.perf_counter() - t)
             # per split vertex: the solver gives one value per input vertex (the nearest copy); read the
             # copy's own value back from the input vertex so that MMP on the cut surface compares
