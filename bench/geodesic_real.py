@@ -40,6 +40,7 @@ from meshes import corpus_dir  # noqa: E402
 MESH_DIR = corpus_dir()
 OUT = os.path.join(ROOT, 'out', 'geodesic_real')
 EXCLUDE = 0.02
+SKIP_DEFAULT = False   # --skip-default: the first of --grids instead of the automatic grid
 REAL = ['woody', 'alligator', 'suzanne', 'teapot', 'spot', 'stanford-bunny', 'cow', 'ogre']
 SURF = ['bump', 'bump3', 'edgebump', 'ridge', 'saddle', 'waves', 'cliff', 'blob']
 HEADER = ('| mesh | method | grid | mean % central | far | curvature | multi | max % | below Euclid / above '
@@ -263,7 +264,7 @@ def run_mesh(name, grids, rows, calib, plot, sphere=False):
         return run_sphere(name, V, F, rows, plot)
     t = time.perf_counter()
     try:
-        gs = GeodesicSolver(V, F, seams=seams)
+        gs = GeodesicSolver(V, F, seams=seams, grid=grids[0] if SKIP_DEFAULT and grids else None)
     except ConformalError as exc:
         print(f"# {name}: not handled ({exc}); skipped", flush=True)
         return
@@ -335,7 +336,8 @@ def run_mesh(name, grids, rows, calib, plot, sphere=False):
     upper = {k: reduce(v) for k, v in upper.items()}
     g_def = max(c.size for c in gs.charts)
     d, tq, rep = ours(gs)
-    evaluate(f'ours default ({g_def})', 'ours default', g_def, d, t_setup, tq, rep)
+    label = 'ours' if SKIP_DEFAULT else 'ours default'
+    evaluate(f'ours default ({g_def})', label, g_def, d, t_setup, tq, rep)
     calib.append({'mesh': name, 'grid': g_def, 'cell': ch.cell, 'reflex': ch.reflex,
                   'mean': results[f'ours default ({g_def})']['mean'], 'estimate': rep['estimate']})
     for g in grids:
@@ -493,7 +495,11 @@ def main():
                     help='closed genus-0 meshes to measure in sphere mode (default: spot cheburashka)')
     ap.add_argument('--grids', nargs='*', type=int)
     ap.add_argument('--no-plot', action='store_true')
+    ap.add_argument('--skip-default', action='store_true',
+                    help='do not run the automatic grid (the first of --grids takes its place)')
     a = ap.parse_args()
+    global SKIP_DEFAULT
+    SKIP_DEFAULT = a.skip_default
     if not os.path.isdir(MESH_DIR):
         print(f"# {MESH_DIR} is missing: only the generated surfaces are measured")
     names = a.meshes if a.meshes is not None else (['bump', 'edgebump', 'woody', 'spot'] if a.quick
