@@ -40,16 +40,43 @@ from meshes import corpus_dir  # noqa: E402
 MESH_DIR = corpus_dir()
 OUT = os.path.join(ROOT, 'out', 'geodesic_real')
 EXCLUDE = 0.02
+SKIP_DEFAULT = False   # --skip-default: the first of --grids instead of the automatic grid
 REAL = ['woody', 'alligator', 'suzanne', 'teapot', 'spot', 'stanford-bunny', 'cow', 'ogre']
 SURF = ['bump', 'bump3', 'edgebump', 'ridge', 'saddle', 'waves', 'cliff', 'blob']
-HEADER = ('| mesh | verts | tris | method | grid | mean err % | max err % | set-up s | query s | '
-          'estimate % | warnings (3 queries) |\n|---|---|---|---|---|---|---|---|---|---|---|')
+HEADER = ('| mesh | method | grid | mean % central | far | curvature | multi | max % | below Euclid / above '
+          'edges +0.1% | set-up s | query s | estimate % | warnings |\n'
+          '|---|---|---|---|---|---|---|---|---|---|---|---|---|')
 
 
 def print_row(r):
-    est = '-' if r[9] is None else f"{100 * r[9]:.3g}"
-    print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]} | {r[4]} | {100 * r[5]:.4f} | {100 * r[6]:.3f} | "
-          f"{r[7]:.2f} | {r[8]:.2f} | {est} | {'-' if r[10] is None else r[10]} |", flush=True)
+    p = r['per_set']
+    est = f"{100 * r['estimate']:.3g}" if 'estimate' in r else '-'
+    print(f"| {r['mesh']} | {r['method']} | {r['grid']} | " + ' | '.join(f"{100 * p[k][0]:.4f}" for k in SETS)
+          + f" | {100 * r['max']:.3f} | {r['below_euclid']} / {r['above_edges']} | {r['setup']:.2f} | "
+          f"{r['query']:.3f} | {est} | {r.get('warnings', '-')} |", flush=True)
+
+
+def summary(rows):
+    """Per mesh: our default against heat and mesh FMM (the smallest ratio over the source sets), and
+    our repeated query against the heat method's one-shot time (set-up + one solve)."""
+    print('\n| mesh | ours mean (worst set) % | ours max % | heat / ours (min over sets) | '
+          'FMM / ours (min over sets) | ours query s | heat one-shot s | query / heat one-shot |\n'
+          '|---|---|---|---|---|---|---|---|')
+    for mesh in dict.fromkeys(r['mesh'] for r in rows):
+        rs = [r for r in rows if r['mesh'] == mesh]
+        o = next((r for r in rs if r['method'] in ('ours default', 'ours sphere mode')), None)
+        h = next((r for r in rs if r['method'].startswith('heat')), None)
+        f = next((r for r in rs if r['method'].startswith('mesh FMM')), None)
+        if o is None or h is None:
+            continue
+
+        def ratio(x, o=o):
+            if x is None:
+                return '-'
+            return f"{min(x['per_set'][k][0] / max(o['per_set'][k][0], 1e-12) for k in SETS):.1f}x"
+        one = h['setup'] + h['query']
+        print(f"| {mesh} | {100 * o['worst_mean']:.4f} | {100 * o['max']:.3f} | {ratio(h)} | {ratio(f)} | "
+              f"{o['query']:.3f} | {one:.3f} | {o['query'] / max(one, 1e-9):.1f}x |", flush=True)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -149,16 +176,95 @@ def rel_err(d, D, keep):
 
 
 # --------------------------------------------------------------------------------------------------
-def run_mesh(name, grids, rows, calib, plot):
+SETS = ('central', 'far', 'curvature', 'multi')
+
+
+def source_sets(V, F, part, graph, boundary):
+    """The four source sets on the split mesh ``V``, ``F`` within the split vertices ``part``:
+    'central' (the middle of an approximate edge-graph diameter: the vertex minimising the larger of its
+    distances to the diameter's two ends), 'far' (the boundary vertex farthest from the central one, or
+    the diameter's far end on a closed part), 'curvature' (the interior vertex of largest absolute
+    angle defect), 'multi' (those three together). Returns {name: (k,) split vertex indices}."""
+    from scipy.sparse.csgraph import dijkstra
+    from core.mesh.geometry import corner_angles
+    d0 = dijkstra(graph, indices=int(part[0]))
+    a = int(part[np.argmax(np.where(np.isfinite(d0[part]), d0[part], -1))])
+    da = dijkstra(graph, indices=a)
+    b = int(part[np.argmax(np.where(np.isfinite(da[part]), da[part], -1))])
+    db = dijkstra(graph, indices=b)
+    c = int(part[np.argmin(np.maximum(da[part], db[part]))])
+    dc = dijkstra(graph, indices=c)
+    bpart = part[boundary[part]]
+    far = int(bpart[np.argmax(dc[bpart])]) if len(bpart) else b
+    ang = corner_angles(V, F)
+    defect = 2 * np.pi - np.bincount(F.ravel(), ang.ravel(), minlength=len(V))
+    inner = part[~boundary[part]]
+    curv = int(inner[np.argmax(np.abs(defect[inner]))]) if len(inner) else int(part[1])
+    return {'central': np.array([c]), 'far': np.array([far]), 'curvature': np.array([curv]),
+            'multi': np.unique([c, far, curv])}
+
+
+def exact_multi(Vs, Fs, sets):
+    """{name: (N,) exact polyhedral distance (MMP, pygeodesic) to the nearest source of the set}."""
+    from pygeodesic import geodesic
+    alg = geodesic.PyGeodesicAlgorithmExact(np.ascontiguousarray(Vs, np.float64),
+                                            np.ascontiguousarray(Fs, np.int32))
+    out, t = {}, time.perf_counter()
+    for k, src in sets.items():
+        d, _ = alg.geodesicDistances(np.asarray(src, np.int32), None)
+        out[k] = np.asarray(d, np.float64)
+    return out, (time.perf_counter() - t) / len(sets)
+
+
+def fmm_setup(Vs, Fs):
+    """Fast marching on the mesh (potpourri3d 1.4's ``MeshFastMarchingDistanceSolver``, geometry-central's
+    FMM with the obtuse-triangle unfolding): ``distance(sources) -> (N,)``, or None if missing."""
+    try:
+        import potpourri3d as pp3d
+        solver = pp3d.MeshFastMarchingDistanceSolver(np.asarray(Vs, np.float64), np.asarray(Fs, np.int64))
+    except (ImportError, AttributeError):
+        return None
+    return lambda src: np.asarray(solver.compute_distance([[(int(s), [])] for s in src]), np.float64).ravel()
+
+
+def heat_multi(Vs, Fs):
+    """The heat method on the split mesh: ``(name, setup seconds, distance(sources) -> (N,))``."""
+    t = time.perf_counter()
+    try:
+        import potpourri3d as pp3d
+        solver = pp3d.MeshHeatMethodDistanceSolver(np.asarray(Vs, np.float64), np.asarray(Fs, np.int64))
+        fn = lambda src: np.asarray(solver.compute_distance_multisource([int(s) for s in src]), np.float64)  # noqa: E731
+        name = 'heat (potpourri3d)'
+    except ImportError:
+        one = heat_method(Vs, Fs)
+        fn = lambda src: np.min([one(int(s)) for s in src], axis=0)  # noqa: E731
+        name = 'heat (own)'
+    return name, time.perf_counter() - t, fn
+
+
+def bounds_violations(d, Vs, src, upper, keep):
+    """Vertices (count) below the 3D distance to the nearest source, and above the edge-graph
+    distance ``upper`` by more than 0.1 %, among ``keep``."""
+    E = np.min(np.linalg.norm(Vs[:, None, :] - Vs[src][None], axis=2), axis=1)
+    below = keep & (d < E * (1 - 1e-9) - 1e-12)
+    above = keep & (d > upper * 1.001)
+    return int(below.sum()), int(above.sum())
+
+
+def run_mesh(name, grids, rows, calib, plot, sphere=False):
+    """Every source set on one mesh: our solver at its default grid and at ``grids``, the heat method,
+    mesh fast marching, all against MMP. Appends rows (dicts) to ``rows``."""
     got = load(name)
     if got is None:
         print(f"# {name}: not found in {MESH_DIR} (the public meshes are not in a user's clone); skipped",
               flush=True)
         return
     V, F, seams = got
+    if sphere:
+        return run_sphere(name, V, F, rows, plot)
     t = time.perf_counter()
     try:
-        gs = GeodesicSolver(V, F, seams=seams)
+        gs = GeodesicSolver(V, F, seams=seams, grid=grids[0] if SKIP_DEFAULT and grids else None)
     except ConformalError as exc:
         print(f"# {name}: not handled ({exc}); skipped", flush=True)
         return
@@ -166,93 +272,189 @@ def run_mesh(name, grids, rows, calib, plot):
     Vs, Fs = gs.Vs, gs.Fs
     ch = max(gs.charts, key=lambda c: len(c.verts))
     part = ch.verts                                              # split vertices of the largest island
-    rng = np.random.default_rng(0)
-    src_split = rng.choice(part, 3, replace=False)
-    src = gs.vert_of[src_split]
-    t = time.perf_counter()
-    D = exact(Vs, Fs, src_split)
-    t_exact = (time.perf_counter() - t) / len(src)
+    from core.mesh.topology import boundary_loops
+    bnd = np.zeros(len(Vs), bool)
+    for L in boundary_loops(Fs, len(Vs)):
+        bnd[np.asarray(L)] = True
+    sets = source_sets(Vs, Fs, part, gs.graph, bnd)
+    # a source vertex on a seam is a source on every side of it (the solver takes all its copies)
+    sets = {k: np.flatnonzero(np.isin(gs.vert_of, gs.vert_of[v])) for k, v in sets.items()}
+    D, t_exact = exact_multi(Vs, Fs, sets)
+    from scipy.sparse.csgraph import dijkstra
+    upper = {k: dijkstra(gs.graph, indices=src, min_only=True) for k, src in sets.items()}
     diag = float(np.linalg.norm(np.ptp(Vs[part], axis=0)))
-    heat_name, heat = heat_setup(Vs, Fs)
+    in_part = np.zeros(len(Vs), bool)
+    in_part[part] = True
+    keep = {}
+    for k, src in sets.items():
+        near = np.min(np.linalg.norm(Vs[:, None, :] - Vs[src][None], axis=2), axis=1) <= EXCLUDE * diag
+        keep[k] = in_part & ~near & np.isfinite(D[k]) & (D[k] > 0) & (D[k] < 1e30)
     results = {}
 
-    n = len(V)
-    vert_of = gs.vert_of
-    in_part = np.zeros(n, bool)
-    in_part[vert_of[part]] = True
-
-    def per_vertex(x):
-        """Per input vertex: the smallest value over its split copies (a seam vertex is the nearest
-        of its copies, as the solver reports it)."""
-        out = np.full(n, np.inf)
-        np.minimum.at(out, vert_of, x)
-        return out
-
-    D_in = [per_vertex(D[k]) for k in range(len(src))]
-
-    def evaluate(label, dist_split_list, seconds):
-        errs = []
-        for k, s in enumerate(src_split):
-            keep = in_part & (np.linalg.norm(V - Vs[s], axis=1) > EXCLUDE * diag)
-            keep &= np.isfinite(D_in[k]) & (D_in[k] > 0) & (D_in[k] < 1e30)
-            errs.append(rel_err(per_vertex(dist_split_list[k]), D_in[k], keep))
-        e = np.array(errs)
-        results[label] = (float(e[:, 0].mean()), float(e[:, 1].max()), seconds)
-        return results[label]
+    def evaluate(label, method, grid, dists, setup, query, extra=None):
+        """``dists`` {set: (N,) on the split mesh}: relative errors per set, bound violations."""
+        per, viol = {}, [0, 0]
+        for k in SETS:
+            d, kk = dists[k], keep[k]
+            r = np.abs(d[kk] - D[k][kk]) / D[k][kk]
+            per[k] = (float(r.mean()), float(r.max()))
+            b, a = bounds_violations(d, Vs, sets[k], upper[k], kk)
+            viol[0] += b
+            viol[1] += a
+        row = {'mesh': name, 'verts': len(V), 'tris': len(F), 'method': method, 'grid': grid,
+               'per_set': per, 'mean': float(np.mean([v[0] for v in per.values()])),
+               'worst_mean': max(v[0] for v in per.values()), 'max': max(v[1] for v in per.values()),
+               'setup': setup, 'query': query, 'below_euclid': viol[0], 'above_edges': viol[1]}
+        row.update(extra or {})
+        rows.append(row)
+        results[label] = row
+        return row
 
     def ours(solver):
-        out, tq, est, warn, med = [], 0.0, [], 0, []
-        for s in src:
+        out, tq, est, warn = {}, [], [], 0
+        for k in SETS:
             t = time.perf_counter()
-            d, rep = solver.distance([int(s)])
-            tq += time.perf_counter() - t
-            out.append(d[solver.vert_of])
+            d, rep = solver.distance(np.unique(solver.vert_of[sets[k]]))
+            tq.append(time.perf_counter() - t)
+            # per split vertex: the solver gives one value per input vertex (the nearest copy); read the
+            # copy's own value back from the input vertex so that MMP on the cut surface compares
+            out[k] = d[solver.vert_of]
             est.append(rep['error_estimate'])
             warn += len(rep['warnings'])
-            fin = d[np.isfinite(d) & (d > 0)]
-            med.append(float(np.median(fin)))
-        return out, tq / len(src), {'error_estimate': float(np.mean(est)), 'warnings': warn,
-                                    'median': float(np.mean(med))}
+        return out, float(np.mean(tq)), {'estimate': float(np.mean(est)), 'warnings': warn}
 
-    d_list, tq, rep = ours(gs)
+    # our per-input-vertex value is the minimum over its split copies; compare on the split mesh with MMP
+    # likewise reduced (a seam vertex is the nearest of its copies, for every method and MMP alike)
+    vert_of = gs.vert_of
+
+    def reduce(x):
+        out = np.full(len(V), np.inf)
+        np.minimum.at(out, vert_of, x)
+        return out[vert_of]
+
+    D = {k: reduce(v) for k, v in D.items()}
+    upper = {k: reduce(v) for k, v in upper.items()}
     g_def = max(c.size for c in gs.charts)
-    m, x, _ = evaluate(f'ours default (grid {g_def})', d_list, t_setup + tq)
-    rows.append((name, len(V), len(F), 'ours default', g_def, m, x, t_setup, tq, rep['error_estimate'],
-                 rep['warnings']))
-    calib.append({'mesh': name, 'grid': g_def, 'cell': ch.cell, 'spread': ch.spread, 'reflex': ch.reflex,
-                  'median': rep['median'],
-                  'mean': m, 'max': x, 'estimate': rep['error_estimate']})
+    d, tq, rep = ours(gs)
+    label = 'ours' if SKIP_DEFAULT else 'ours default'
+    evaluate(f'ours default ({g_def})', label, g_def, d, t_setup, tq, rep)
+    calib.append({'mesh': name, 'grid': g_def, 'cell': ch.cell, 'reflex': ch.reflex,
+                  'mean': results[f'ours default ({g_def})']['mean'], 'estimate': rep['estimate']})
     for g in grids:
         if g == g_def:
             continue
         t = time.perf_counter()
         gg = GeodesicSolver(V, F, seams=seams, grid=g)
         ts = time.perf_counter() - t
-        d_list, tq, rep = ours(gg)
-        c2 = max(gg.charts, key=lambda c: len(c.verts))
-        m, x, _ = evaluate(f'ours grid {g}', d_list, ts + tq)
-        rows.append((name, len(V), len(F), 'ours', g, m, x, ts, tq, rep['error_estimate'],
-                     rep['warnings']))
-        calib.append({'mesh': name, 'grid': g, 'cell': c2.cell, 'spread': c2.spread, 'reflex': c2.reflex,
-                      'median': rep['median'],
-                      'mean': m, 'max': x, 'estimate': rep['error_estimate']})
-    t = time.perf_counter()
-    heat_name, heat = heat_setup(Vs, Fs)
-    th_setup = time.perf_counter() - t
-    hl, th = [], 0.0
-    for s in src_split:
+        d, tq, rep = ours(gg)
+        evaluate(f'ours {g}', 'ours', g, d, ts, tq, rep)
+    hname, th_setup, heat = heat_multi(Vs, Fs)
+    hd, th = {}, []
+    for k in SETS:
         t = time.perf_counter()
-        hl.append(np.asarray(heat(int(s)), np.float64))
-        th += time.perf_counter() - t
-    m, x, _ = evaluate(heat_name, hl, th_setup + th / len(src))
-    rows.append((name, len(V), len(F), heat_name, '-', m, x, th_setup, th / len(src), None, None))
-    rows.append((name, len(V), len(F), 'exact MMP', '-', 0.0, 0.0, 0.0, t_exact, None, None))
+        hd[k] = reduce(heat(sets[k]))
+        th.append(time.perf_counter() - t)
+    evaluate(hname, hname, '-', hd, th_setup, float(np.mean(th)))
+    t = time.perf_counter()
+    fmm = fmm_setup(Vs, Fs)
+    tf_setup = time.perf_counter() - t
+    if fmm is not None:
+        fd, tf = {}, []
+        for k in SETS:
+            t = time.perf_counter()
+            fd[k] = reduce(fmm(sets[k]))
+            tf.append(time.perf_counter() - t)
+        evaluate('mesh FMM (potpourri3d)', 'mesh FMM (potpourri3d)', '-', fd, tf_setup, float(np.mean(tf)))
+    rows.append({'mesh': name, 'verts': len(V), 'tris': len(F), 'method': 'exact MMP', 'grid': '-',
+                 'per_set': {k: (0.0, 0.0) for k in SETS}, 'mean': 0.0, 'worst_mean': 0.0, 'max': 0.0,
+                 'setup': 0.0, 'query': t_exact, 'below_euclid': 0, 'above_edges': 0})
     print(f"# {name}: done ({len(V)} vertices, {len(gs.charts)} islands)", flush=True)
     if plot:
         plot_mesh(name, results)
 
 
+def run_sphere(name, V, F, rows, plot):
+    """Sphere mode (``core.sphere.geodesic.sphere_geodesic``) on a closed genus-0 mesh, against MMP on
+    the closed mesh, beside the heat method and mesh FMM; the same four source sets."""
+    from core.sphere.geodesic import sphere_geodesic
+    from core.sphere.map import sphere_map
+    from scipy.sparse.csgraph import dijkstra
+    import scipy.sparse as sp
+    t = time.perf_counter()
+    try:
+        S = sphere_map(V, F).S
+    except ConformalError as exc:
+        print(f"# {name}: sphere mode not handled ({exc}); skipped", flush=True)
+        return
+    t_setup = time.perf_counter() - t
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    w = np.maximum(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1), 1e-300)
+    graph = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
+                          shape=(len(V), len(V))).tocsr()
+    part = np.unique(F)
+    sets = source_sets(V, F, part, graph, np.zeros(len(V), bool))
+    D, t_exact = exact_multi(V, F, sets)
+    diag = float(np.linalg.norm(np.ptp(V[part], axis=0)))
+    results = {}
+
+    def evaluate(label, dists, setup, query, extra=None):
+        per, viol = {}, [0, 0]
+        for k in SETS:
+            src = sets[k]
+            near = np.min(np.linalg.norm(V[:, None, :] - V[src][None], axis=2), axis=1) <= EXCLUDE * diag
+            kk = ~near & np.isfinite(D[k]) & (D[k] > 0)
+            kk[np.setdiff1d(np.arange(len(V)), part)] = False
+            r = np.abs(dists[k][kk] - D[k][kk]) / D[k][kk]
+            per[k] = (float(r.mean()), float(r.max()))
+            up = dijkstra(graph, indices=src, min_only=True)
+            b, a = bounds_violations(dists[k], V, src, up, kk)
+            viol[0] += b
+            viol[1] += a
+        row = {'mesh': name + ' (sphere)', 'verts': len(V), 'tris': len(F), 'method': label, 'grid': '-',
+               'per_set': per, 'mean': float(np.mean([v[0] for v in per.values()])),
+               'worst_mean': max(v[0] for v in per.values()), 'max': max(v[1] for v in per.values()),
+               'setup': setup, 'query': query, 'below_euclid': viol[0], 'above_edges': viol[1]}
+        row.update(extra or {})
+        rows.append(row)
+        results[label] = row
+
+    out, tq = {}, []
+    for k in SETS:
+        t = time.perf_counter()
+        try:
+            d, rep = sphere_geodesic(V, F, sets[k], S=S)
+        except ConformalError as exc:
+            print(f"# {name}: sphere mode failed on the {k} source set ({exc})", flush=True)
+            return
+        tq.append(time.perf_counter() - t)
+        out[k] = d
+    evaluate('ours sphere mode', out, t_setup, float(np.mean(tq)),
+             {'grid': rep.get('grid', '-') if isinstance(rep.get('grid'), int) else '-'})
+    hname, th_setup, heat = heat_multi(V, F)
+    hd, th = {}, []
+    for k in SETS:
+        t = time.perf_counter()
+        hd[k] = heat(sets[k])
+        th.append(time.perf_counter() - t)
+    evaluate(hname, hd, th_setup, float(np.mean(th)))
+    t = time.perf_counter()
+    fmm = fmm_setup(V, F)
+    tf_setup = time.perf_counter() - t
+    if fmm is not None:
+        fd, tf = {}, []
+        for k in SETS:
+            t = time.perf_counter()
+            fd[k] = fmm(sets[k])
+            tf.append(time.perf_counter() - t)
+        evaluate('mesh FMM (potpourri3d)', fd, tf_setup, float(np.mean(tf)))
+    print(f"# {name} (sphere mode): done; exact MMP {t_exact:.2f} s per set", flush=True)
+    if plot:
+        plot_mesh(name + '_sphere', results)
+
+
 def plot_mesh(name, results):
+    """Mean error (mean over the source sets) against time: ours at its grids (repeated query, and one
+    shot with the set-up), heat and mesh FMM one shot."""
     try:
         import matplotlib
         matplotlib.use('Agg')
@@ -261,10 +463,20 @@ def plot_mesh(name, results):
         print("# matplotlib is not installed: no plots")
         return
     os.makedirs(OUT, exist_ok=True)
-    fig, ax = plt.subplots(figsize=(5, 3.6))
-    for label, (m, _x, s) in results.items():
-        ax.loglog([s], [100 * m], 'o', label=label)
-    ax.set_xlabel('seconds (set-up + one query)')
+    fig, ax = plt.subplots(figsize=(5.2, 3.8))
+    ours = sorted((r for r in results.values() if r['method'].startswith('ours')),
+                  key=lambda r: r['grid'] if isinstance(r['grid'], int) else 0)
+    if ours:
+        ax.loglog([r['query'] for r in ours], [100 * r['mean'] for r in ours], 'o-',
+                  label='ours, repeated query')
+        ax.loglog([r['setup'] + r['query'] for r in ours], [100 * r['mean'] for r in ours], 's--',
+                  label='ours, one shot')
+        for r in ours:
+            ax.annotate(str(r['grid']), (r['query'], 100 * r['mean']), fontsize=6)
+    for r in results.values():
+        if not r['method'].startswith('ours'):
+            ax.loglog([r['setup'] + r['query']], [100 * r['mean']], '^', label=r['method'] + ', one shot')
+    ax.set_xlabel('seconds')
     ax.set_ylabel('mean relative error, %')
     ax.set_title(name)
     ax.grid(True, which='both', alpha=0.3)
@@ -279,14 +491,21 @@ def main():
     ap.add_argument('--quick', action='store_true')
     ap.add_argument('--calibrate', action='store_true', help='print the calibration rows as JSON')
     ap.add_argument('--meshes', nargs='*')
+    ap.add_argument('--sphere', nargs='*', default=None,
+                    help='closed genus-0 meshes to measure in sphere mode (default: spot cheburashka)')
     ap.add_argument('--grids', nargs='*', type=int)
     ap.add_argument('--no-plot', action='store_true')
+    ap.add_argument('--skip-default', action='store_true',
+                    help='do not run the automatic grid (the first of --grids takes its place)')
     a = ap.parse_args()
+    global SKIP_DEFAULT
+    SKIP_DEFAULT = a.skip_default
     if not os.path.isdir(MESH_DIR):
         print(f"# {MESH_DIR} is missing: only the generated surfaces are measured")
-    names = a.meshes or (['bump', 'edgebump', 'blob', 'woody', 'suzanne', 'spot'] if a.quick
-                         else SURF + REAL[:-1])
-    grids = a.grids or ([512, 1024] if a.quick else [512, 1024, 2048, 4096])
+    names = a.meshes if a.meshes is not None else (['bump', 'edgebump', 'woody', 'spot'] if a.quick
+                                                   else SURF + REAL[:-1])
+    sphere = a.sphere if a.sphere is not None else ([] if a.quick or a.meshes else ['spot', 'cheburashka'])
+    grids = a.grids if a.grids is not None else ([512, 1024] if a.quick else [512, 1024, 2048, 4096])
     rows, calib = [], []
     print(HEADER, flush=True)
     for name in names:
@@ -294,6 +513,12 @@ def main():
         run_mesh(name, grids, rows, calib, not a.no_plot)
         for r in rows[n0:]:
             print_row(r)
+    for name in sphere:
+        n0 = len(rows)
+        run_mesh(name, [], rows, calib, not a.no_plot, sphere=True)
+        for r in rows[n0:]:
+            print_row(r)
+    summary(rows)
     if a.calibrate:
         print(json.dumps(calib))
 

@@ -34,7 +34,13 @@ A query (``GeodesicSolver.distance``):
 5. March with scikit-fmm ``travel_time(order=2)`` or, without scikit-fmm, the numpy fast sweeping
    solver of ``core.geodesic.eikonal``, without the rim nodes that bridge gaps of the domain
    (``bridging_rim``; they get extrapolated times, ``extrapolate_rim``). Sources whose ``mu`` differ
-   by more than a factor 2 march separately and the minimum is taken.
+   by more than a factor 2 march separately and the minimum is taken. With ``mu_mode='metric'`` (the
+   default) the march is repeated with the exact metric of the map: the map is affine on each
+   triangle, so the surface length of a UV step ``du`` is ``sqrt(du^T G du)`` with one constant
+   ``G`` (2x2) per triangle (``face_metric_inverse``); for the gradient direction ``g`` of the
+   previous march the anisotropic eikonal equals the isotropic one with speed
+   ``sqrt(g^T G^-1 g)`` (``directional_mu``). This removes the mesh's floor (the smooth per-vertex
+   ``mu`` against the per-triangle, slightly anisotropic metric): the error then falls with the grid.
 6. Sample the travel time back to the vertices bilinearly, then clamp each vertex between two exact
    bounds: the 3D distance to the nearest source (below) and the shortest edge path (Dijkstra, above).
 """
@@ -47,7 +53,7 @@ from ..mesh.geometry import face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
-MU_MODES = ('vertex', 'face')
+MU_MODES = ('metric', 'vertex', 'face')
 GRID_MIN, GRID_MAX = 64, 4096
 GRID_AUTO_MIN = 256          # the automatic grid never goes below this (nodes along the longer side)
 GRID_AUTO_MAX = 4096         # nor above this; a warning says when the error target needs more
@@ -57,6 +63,8 @@ RIM = 1
 # everywhere in core.geodesic). The sweep's second-order stencil is less accurate on strongly curved
 # fronts than fast marching's, so it starts from a larger disk, SWEEP_SEED_RADIUS (docs/geodesic.md).
 SEED_RADIUS = 24.0
+UNRESOLVED = 2.0     # a triangle whose surface cell h / mu exceeds this times its mean edge is not resolved
+METRIC_PASSES = 2    # mu_mode 'metric': marches with the exact metric after the isotropic first one
 SWEEP_SEED_RADIUS = 36.0
 
 
@@ -75,6 +83,126 @@ def face_mu(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndarray:
                              "geodesic distances need a fold-free map (flatten again, or use "
                              "boundary 'area' or 'uniform')", 'degenerate', 'area_boundary')
     return np.sqrt(np.abs(a) / A)
+
+
+def face_metric_inverse(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """The inverse of each triangle's pulled-back metric, (m,3) as ``(a, b, c)`` of the symmetric 2x2
+    ``G^-1 = [[a, b], [b, c]]`` (UV units squared per surface unit squared).
+
+    The map ``uv`` (n,2) is affine on each triangle of ``F`` (m,3), so a UV displacement ``du`` has the
+    surface length ``sqrt(du^T G du)`` with a constant ``G = J^T J`` per triangle (``J`` (3,2) the
+    differential of the inverse map, UV to 3D). The surface eikonal ``|grad_X T| = 1`` becomes
+    ``grad_uv T^T G^-1 grad_uv T = 1`` (docs/math.md, "Geodesic distance on the conformal plane"); for an
+    exactly conformal triangle ``G^-1 = mu^2 I``. With ``E3`` (3,2) the 3D edge vectors and ``E2`` (2,2)
+    the UV ones, ``G^-1 = E2 (E3^T E3)^-1 E2^T``."""
+    X = V[F]
+    U = uv[F]
+    e1, e2 = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
+    g11, g12, g22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    det = g11 * g22 - g12 * g12
+    i11, i12, i22 = g22 / det, -g12 / det, g11 / det                  # (E3^T E3)^-1
+    p = U[:, 1] - U[:, 0]                                              # E2 columns
+    q = U[:, 2] - U[:, 0]
+    # E2 K E2^T with E2 = [p q] (columns): sum_kl E2[:,k] K_kl E2[:,l]
+    a = i11 * p[:, 0] ** 2 + 2 * i12 * p[:, 0] * q[:, 0] + i22 * q[:, 0] ** 2
+    b = i11 * p[:, 0] * p[:, 1] + i12 * (p[:, 0] * q[:, 1] + q[:, 0] * p[:, 1]) + i22 * q[:, 0] * q[:, 1]
+    c = i11 * p[:, 1] ** 2 + 2 * i12 * p[:, 1] * q[:, 1] + i22 * q[:, 1] ** 2
+    return np.stack([a, b, c], 1)
+
+
+def directional_mu(T, valid, face, ginv):
+    """The speed (ny, nx) that makes the isotropic eikonal ``|grad T| = 1 / mu`` agree with the
+    anisotropic one ``grad T^T G^-1 grad T = 1`` for the gradient direction ``g`` of a travel-time
+    field ``T`` (ny, nx): ``mu = sqrt(g^T G^-1 g)``, ``G^-1`` (m,3) per triangle (``face_metric_inverse``)
+    at each node's triangle ``face`` (ny, nx). The gradient is a central difference where both
+    neighbours are finite and ``valid``, else one-sided; nodes with no usable neighbour on either axis
+    get the isotropic ``sqrt(sqrt(det G^-1))``. NaN-free; 1 at unused nodes."""
+    Tf = np.where(valid & np.isfinite(T), T, np.nan)
+    pad = np.pad(Tf, 1, constant_values=np.nan)
+    c = pad[1:-1, 1:-1]
+
+    def diff(lo, hi):
+        both = np.isfinite(lo) & np.isfinite(hi)
+        d = np.where(both, 0.5 * (hi - lo), np.nan)
+        d = np.where(~both & np.isfinite(hi), hi - c, d)
+        return np.where(~both & ~np.isfinite(hi) & np.isfinite(lo), c - lo, d)
+
+    gx = diff(pad[1:-1, :-2], pad[1:-1, 2:])
+    gy = diff(pad[:-2, 1:-1], pad[2:, 1:-1])
+    nrm = np.hypot(gx, gy)
+    f = np.where(face >= 0, face, 0)
+    a, b, cc = ginv[f, 0], ginv[f, 1], ginv[f, 2]
+    iso = np.sqrt(np.sqrt(np.maximum(a * cc - b * b, 1e-300)))
+    ok = np.isfinite(nrm) & (nrm > 0)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        x, y = gx / nrm, gy / nrm
+        mu = np.sqrt(np.maximum(a * x * x + 2 * b * x * y + cc * y * y, 1e-300))
+    mu = np.where(ok, mu, iso)
+    return np.where(valid & (face >= 0), mu, 1.0)
+
+
+# --------------------------------------------------------------------------------------------------
+# on-mesh fast marching where the grid does not resolve the surface
+class MeshRelax:
+    """Fast marching on the mesh itself (planar-front triangle updates), restricted to a set of free
+    vertices, relaxed in place: used where the grid's surface cell ``h / mu`` is larger than the
+    triangles (docs/geodesic.md, "Under-resolved regions").
+
+    For a triangle with corners ``C``, ``A``, ``B`` and known times ``T_A``, ``T_B``, the update of
+    ``C`` is the time of the plane front through ``A`` and ``B`` with unit surface gradient: with
+    the Gram matrix ``M`` of the edge vectors ``e_A = A - C``, ``e_B = B - C`` (3D, mesh units),
+    ``Q = M^-1`` and ``r = (T_A, T_B)``, ``t`` is the larger root of
+    ``(1^T Q 1) t^2 - 2 (1^T Q r) t + r^T Q r - 1 = 0``, accepted when the front reaches ``C`` from
+    inside the triangle (both coefficients of ``Q (r - t 1)`` non-positive), else the edge updates
+    ``T_A + |e_A|``, ``T_B + |e_B|``. Every (triangle, corner) update of the free vertices runs at
+    once (numpy), repeated until nothing decreases: the monotone scheme's fixed point, which
+    sequential fast marching reaches in one ordered pass.
+
+    ``V`` (k,3), ``F`` (m,3) one chart's mesh; ``faces`` (q,) the triangles with a free corner."""
+
+    def __init__(self, V, F, faces):
+        self.faces = faces
+        c, a, b = [], [], []
+        for k in range(3):
+            c.append(F[faces, k])
+            a.append(F[faces, (k + 1) % 3])
+            b.append(F[faces, (k + 2) % 3])
+        self.c, self.a, self.b = np.concatenate(c), np.concatenate(a), np.concatenate(b)
+        eA, eB = V[self.a] - V[self.c], V[self.b] - V[self.c]
+        m11, m12, m22 = (eA * eA).sum(1), (eA * eB).sum(1), (eB * eB).sum(1)
+        det = np.maximum(m11 * m22 - m12 * m12, 1e-300)
+        self.q11, self.q12, self.q22 = m22 / det, -m12 / det, m11 / det
+        self.la, self.lb = np.sqrt(m11), np.sqrt(m22)
+
+    def relax(self, T, free, max_iter=100_000):
+        """Lower ``T`` (k,) at the ``free`` (k,) bool vertices to the fixed point of the triangle
+        updates (the others are boundary data); ``T`` at free vertices should start at inf. Returns
+        the number of rounds."""
+        q11, q12, q22 = self.q11, self.q12, self.q22
+        s1 = q11 + 2 * q12 + q22                                   # 1^T Q 1
+        target = free[self.c]
+        c, a, b = self.c[target], self.a[target], self.b[target]
+        q11, q12, q22, s1 = q11[target], q12[target], q22[target], s1[target]
+        la, lb = self.la[target], self.lb[target]
+        for it in range(1, max_iter + 1):
+            ta, tb = T[a], T[b]
+            with np.errstate(invalid='ignore', over='ignore'):
+                s2 = (q11 + q12) * ta + (q12 + q22) * tb           # 1^T Q r
+                s3 = q11 * ta * ta + 2 * q12 * ta * tb + q22 * tb * tb - 1.0
+                disc = s2 * s2 - s1 * s3
+                t = (s2 + np.sqrt(np.maximum(disc, 0.0))) / s1
+                al = q11 * (ta - t) + q12 * (tb - t)
+                be = q12 * (ta - t) + q22 * (tb - t)
+                ok = (np.isfinite(ta) & np.isfinite(tb) & (disc >= 0) & (al <= 0) & (be <= 0)
+                      & (t >= np.maximum(ta, tb)))
+            cand = np.minimum(np.where(ok, t, np.inf), np.minimum(ta + la, tb + lb))
+            new = T.copy()
+            np.minimum.at(new, c, cand)
+            changed = new < T * (1 - 1e-13) - 1e-300
+            T[:] = new
+            if not changed.any():
+                return it
+        return max_iter
 
 
 # --------------------------------------------------------------------------------------------------
@@ -204,9 +332,10 @@ def align_uv(uv, used=None):
     return uv @ R
 
 
-def bilinear(field, pts, valid=None):
+def bilinear(field, pts, valid=None, corner_ok=None):
     """Bilinear samples (k,) of ``field`` (ny, nx) at continuous node coordinates ``pts`` (k,2)
-    (column, row). Invalid nodes (``valid`` False or non-finite values) are left out and the weights
+    (column, row). Invalid nodes (``valid`` False or non-finite values, or ``corner_ok`` (k,4) False
+    for that point's corner in the order (0,0), (0,1), (1,0), (1,1)) are left out and the weights
     renormalised; a point with no valid corner gets NaN."""
     ny, nx = field.shape
     x = np.clip(pts[:, 0], 0, nx - 1 - 1e-9)
@@ -215,12 +344,14 @@ def bilinear(field, pts, valid=None):
     fx, fy = x - j, y - i
     num = np.zeros(len(pts))
     den = np.zeros(len(pts))
-    for di, dj, w in ((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)),
-                      (1, 0, (1 - fx) * fy), (1, 1, fx * fy)):
+    for q, (di, dj, w) in enumerate(((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)),
+                                     (1, 0, (1 - fx) * fy), (1, 1, fx * fy))):
         v = field[i + di, j + dj]
         ok = np.isfinite(v)
         if valid is not None:
             ok &= valid[i + di, j + dj]
+        if corner_ok is not None:
+            ok &= corner_ok[:, q]
         num += np.where(ok, w * np.where(ok, v, 0.0), 0.0)
         den += np.where(ok, w, 0.0)
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -239,7 +370,7 @@ def default_grid(V, F, uv):
 
 
 
-def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None):
+def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None, metric=None):
     """Flat-chart times (``_chart_time``, ``inv_mu`` the grid field 1/mu) from the sources ``S`` (k,2,
     node coordinates). With ``pts`` None:
     on the grid, over a window of ``radius_nodes + 2`` around each source, returns (ny, nx) with inf
@@ -266,7 +397,7 @@ def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None):
             keep = valid[ii, jj]
             ii, jj, src = ii[keep], jj[keep], src[keep]
             P = np.stack([jj, ii], 1).astype(np.float64)
-            np.minimum.at(out, (ii, jj), _chart_time(inv_mu, valid, Sb[src], P, h, domain))
+            np.minimum.at(out, (ii, jj), _chart_time(inv_mu, valid, Sb[src], P, h, domain, metric))
         return out
     # at arbitrary points: nearest sources by a KD-tree
     from scipy.spatial import cKDTree
@@ -274,19 +405,39 @@ def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None):
     T = np.full(len(pts), np.inf)
     near = d <= radius_nodes + 1
     if near.any():
-        T[near] = _chart_time(inv_mu, valid, S[k[near]], pts[near], h, domain)
+        T[near] = _chart_time(inv_mu, valid, S[k[near]], pts[near], h, domain, metric)
     return T
 
 
-def _chart_time(inv_mu, valid, S, P, h, inside=None):
+def _chart_time(inv_mu, valid, S, P, h, inside=None, metric=None):
     """Flat-chart time from ``S`` (k,2) to ``P`` (k,2) (node coordinates): ``|P - S| h`` times the
     mean of ``1/mu`` along the segment (Simpson's rule on the grid field ``inv_mu`` = 1/mu). With
     ``inside`` (ny, nx) bool: inf where the segment leaves the domain (``_visible``), since a straight
-    line across a gap of the domain is no path on the surface."""
+    line across a gap of the domain is no path on the surface. With ``metric`` (``face`` (ny, nx), ``G``
+    (m,3) per triangle): the segment's exact surface length in the per-triangle metric instead."""
     d = np.linalg.norm(P - S, axis=1) * h
     inv = (bilinear(inv_mu, S, valid) + 4 * bilinear(inv_mu, 0.5 * (S + P), valid)
            + bilinear(inv_mu, P, valid)) / 6.0
     T = d * inv
+    if metric is not None and len(S):
+        # the exact surface length of the straight UV segment: the midpoint rule over half-cell
+        # pieces, each in the metric G of the triangle of its nearest node (a path on the surface)
+        face, gmet = metric
+        ny, nx = face.shape
+        D = P - S
+        K = int(np.clip(np.ceil(2 * np.linalg.norm(D, axis=1).max()), 1, 256))
+        L = np.zeros(len(S))
+        for k in range(K):
+            Q = S + ((k + 0.5) / K) * D
+            i = np.clip(np.rint(Q[:, 1]).astype(np.int64), 0, ny - 1)
+            j = np.clip(np.rint(Q[:, 0]).astype(np.int64), 0, nx - 1)
+            f = face[i, j]
+            g = gmet[np.maximum(f, 0)]
+            du = D * (h / K)
+            seg = np.sqrt(g[:, 0] * du[:, 0] ** 2 + 2 * g[:, 1] * du[:, 0] * du[:, 1]
+                          + g[:, 2] * du[:, 1] ** 2)
+            L += np.where(f >= 0, seg, np.nan)
+        T = np.where(np.isfinite(L), L, T)
     if inside is not None:
         T = np.where(_visible(inside, S, P), T, np.inf)
     return T
@@ -451,6 +602,66 @@ def bridging_rim(G, F, valid):
     return out
 
 
+def bridging_inside(G, F, fine):
+    """(ny, nx) bool: inside nodes that face a node of another part of the domain across a gap
+    narrower than a cell (a 4-neighbour whose triangle shares no vertex with the node's own), where
+    both triangles are ``fine`` (m,) bool (the cell is well below their edges, so neighbouring
+    nodes of one part lie in the same or touching triangles). Both nodes of such a pair are left
+    out of the march, so that the front does not jump the gap. ``G`` a rasterised ``Grid``, ``F``
+    (m,3) the chart's triangles."""
+    face, inside = G.face, G.inside
+    out = np.zeros(face.shape, bool)
+    for a, b in (((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+                 ((slice(None, -1), slice(None)), (slice(1, None), slice(None)))):
+        fa, fb = face[a], face[b]
+        both = inside[a] & inside[b] & (fa != fb)
+        ii, jj = np.nonzero(both)
+        if not len(ii):
+            continue
+        ta, tb = fa[ii, jj], fb[ii, jj]
+        use = fine[ta] & fine[tb]
+        share = (F[ta][:, :, None] == F[tb][:, None, :]).any((1, 2))
+        gap = use & ~share
+        for sl in (a, b):
+            sub = out[sl]
+            sub[ii[gap], jj[gap]] = True
+    return out
+
+
+def sample_corners(G, F, P, fine):
+    """(k,4) bool: which of the four bilinear corner nodes of each vertex (node coordinates ``P``
+    (k,2)) may give it a value. Where the vertex's triangles are ``fine`` (m,) (cells well below their
+    edges), a corner node must lie in a triangle with a corner in the vertex's one-ring: a node
+    across a narrow gap of the domain (two sides of a hole, a notch), or a rim node extended from the
+    other side, is no sample of this side. Elsewhere every corner may. ``G`` a rasterised ``Grid``
+    with its rim, ``F`` (m,3) the chart's triangles."""
+    import scipy.sparse as sp
+    k = len(P)
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    A = sp.coo_matrix((np.ones(2 * len(E) + k, bool), (np.r_[E[:, 0], E[:, 1], np.arange(k)],
+                                                       np.r_[E[:, 1], E[:, 0], np.arange(k)])),
+                      shape=(k, k)).tocsr()
+    vfine = np.zeros(k, bool)
+    vfine[F[fine].ravel()] = True
+    ny, nx = G.face.shape
+    x = np.clip(P[:, 0], 0, nx - 1 - 1e-9)
+    y = np.clip(P[:, 1], 0, ny - 1 - 1e-9)
+    j, i = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    out = np.ones((k, 4), bool)
+    idx = np.flatnonzero(vfine)
+    if not len(idx):
+        return out
+    for q, (di, dj) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
+        f = G.face[i[idx] + di, j[idx] + dj]
+        has = f >= 0
+        near = np.zeros(len(idx), bool)
+        for c in range(3):
+            cols = F[np.where(has, f, 0), c]
+            near |= np.asarray(A[idx, cols]).ravel().astype(bool)
+        out[idx, q] = ~has | near
+    return out
+
+
 def extrapolate_rim(T, inside, rim, h, inv_mu):
     """Travel times at the rim nodes (outside the domain, next to it) from the inside ones, for
     sampling boundary vertices: per axis direction with two inside nodes ``2 T1 - T2`` (linear
@@ -500,6 +711,7 @@ def _groups(mu_s):
 ERR_GRID_C0 = 0.02     # grid term: (C0 + C1 min(reflex, REFLEX_CAP)) * mean surface cell / median distance
 ERR_GRID_C1 = 0.05
 REFLEX_CAP = 6.0
+ERR_RELAX = 0.005      # on-mesh term: ERR_RELAX * area fraction of the under-resolved triangles
 ERR_MESH = 0.1         # mesh term: ERR_MESH * mu_spread (area-weighted mean of the per-triangle spread)
 TYPICAL_DISTANCE = 0.35  # before a query, the median distance is taken as this times the 3D bbox diagonal
 NODE_BUDGET = 4096 * 4096  # automatic grids of all islands together use at most this many nodes
@@ -529,10 +741,14 @@ def mu_spread(F: np.ndarray, mu_face: np.ndarray, area: np.ndarray) -> float:
     return float((area * s).sum() / area.sum())
 
 
-def surface_cell(mu_face: np.ndarray, area: np.ndarray, h: float) -> float:
+def surface_cell(mu_face: np.ndarray, area: np.ndarray, h: float, where: np.ndarray | None = None) -> float:
     """The grid's mean cell size in surface units (mesh units): the area-weighted (``area`` (m,)) mean
-    over the triangles of ``h / mu_T`` for a grid spacing ``h`` (UV units) and the realised scale
-    ``mu_face`` (m,) (UV units per surface unit)."""
+    over the triangles (those of ``where`` (m,) bool, default all) of ``h / mu_T`` for a grid spacing
+    ``h`` (UV units) and the realised scale ``mu_face`` (m,) (UV units per surface unit)."""
+    if where is not None:
+        if not where.any():
+            return 0.0
+        mu_face, area = mu_face[where], area[where]
     return float((area * (h / mu_face)).sum() / area.sum())
 
 
@@ -541,12 +757,14 @@ def grid_coefficient(reflex: float) -> float:
     return ERR_GRID_C0 + ERR_GRID_C1 * min(reflex, REFLEX_CAP)
 
 
-def error_estimate(cell: float, distance: float, spread: float, reflex: float) -> float:
+def error_estimate(cell: float, distance: float, spread: float, reflex: float, free: float = 0.0) -> float:
     """Estimated mean relative error (dimensionless) of the distances on a chart whose mean surface
-    cell is ``cell`` (``surface_cell``, mesh units), for a query whose median distance is ``distance``
-    (mesh units), on a map with ``mu_spread`` ``spread`` over a domain with ``reflex_turning``
-    ``reflex``: ``grid_coefficient(reflex) * cell / distance + ERR_MESH * spread``."""
-    return float(grid_coefficient(reflex) * cell / max(distance, 1e-300) + ERR_MESH * spread)
+    cell is ``cell`` (``surface_cell`` over the resolved triangles, mesh units), for a query whose
+    median distance is ``distance`` (mesh units), on a map with ``mu_spread`` ``spread`` over a domain
+    with ``reflex_turning`` ``reflex``, with the area fraction ``free`` under-resolved (on-mesh fast
+    marching): ``grid_coefficient(reflex) * cell / distance + ERR_MESH * spread + ERR_RELAX * free``."""
+    return float(grid_coefficient(reflex) * cell / max(distance, 1e-300) + ERR_MESH * spread
+                 + ERR_RELAX * free)
 
 
 def typical_distance(V: np.ndarray) -> float:
@@ -558,9 +776,10 @@ def typical_distance(V: np.ndarray) -> float:
 def default_grid_for_target(V, F, uv, mu_face, spread, reflex, target=ERROR_TARGET, pad=2):
     """Automatic grid size (nodes along the longer UV side) for one chart, ``V`` (k,3), ``F`` (mi,3),
     ``uv`` (k,2), ``mu_face`` (mi,): the smallest multiple of 64 whose ``error_estimate`` (at the
-    ``typical_distance``) meets ``target``, at least ``default_grid`` (8 nodes per mean UV edge) and
+    ``typical_distance``; the grid term over the triangles that grid resolves, the others counted by
+    the on-mesh term) meets ``target``, at least ``default_grid`` (8 nodes per mean UV edge) and
     ``GRID_AUTO_MIN``, at most ``GRID_AUTO_MAX``. When the mesh term alone uses up the target, the grid
-    term is only brought to half the mesh term (a finer grid would not help). Returns (grid, limit):
+    terms are only brought to half the mesh term (a finer grid would not help). Returns (grid, limit):
     ``limit`` None when the target is met, 'cap' when the cap stops it, 'mesh' when the mesh does."""
     area = face_areas(V, F)
     ext = float(np.ptp(uv[np.unique(F)], axis=0).max())
@@ -569,13 +788,27 @@ def default_grid_for_target(V, F, uv, mu_face, spread, reflex, target=ERROR_TARG
     room, limit = target - floor, None
     if room < 0.5 * floor:
         room, limit = 0.5 * floor, 'mesh'
-    # cell(grid) = cell_unit / (grid - 1 - 2 pad), as the Grid's spacing
-    cell_unit = surface_cell(mu_face, area, ext)
-    g = 1 + 2 * pad + grid_coefficient(reflex) * cell_unit / (max(room, 1e-12) * typical_distance(V))
-    g = int(64 * np.ceil(max(g, base) / 64))
-    if g > GRID_AUTO_MAX:
-        return GRID_AUTO_MAX, limit or 'cap'
-    return g, limit
+    edge = mean_edges(V, F)
+    dist = typical_distance(V)
+    for g in range(int(64 * np.ceil(base / 64)), GRID_AUTO_MAX + 1, 64):
+        h = ext / (g - 1 - 2 * pad)                     # the Grid's spacing
+        un = unresolved_faces(mu_face, edge, h)
+        est = error_estimate(surface_cell(mu_face, area, h, ~un), dist, 0.0, reflex,
+                             float(area[un].sum() / area.sum()))
+        if est <= room:
+            return g, limit
+    return GRID_AUTO_MAX, limit or 'cap'
+
+
+def mean_edges(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Mean 3D edge length (m,) of each triangle of ``F`` (m,3), mesh units."""
+    return np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean(1)
+
+
+def unresolved_faces(mu_face: np.ndarray, edge: np.ndarray, h: float) -> np.ndarray:
+    """(m,) bool: triangles whose surface cell ``h / mu_T`` is above ``UNRESOLVED`` times their mean
+    edge ``edge`` (m,): the grid does not resolve them, on-mesh fast marching does (``MeshRelax``)."""
+    return (h / mu_face) > UNRESOLVED * edge
 
 
 # --------------------------------------------------------------------------------------------------
@@ -593,12 +826,13 @@ class Chart:
     ``cell`` the mean grid cell in surface units; ``error_estimate`` (mean relative, at the typical
     distance; a query re-estimates it from its own distances)."""
 
-    def __init__(self, V, F, uv, verts, faces, grid, target):
+    def __init__(self, V, F, uv, verts, faces, grid, target, mu_mode='metric'):
         self.verts, self.faces, self.V, self.F = verts, faces, V, F
         self.uv = uv = align_uv(uv)
         self.mu_face = mu_f = face_mu(V, F, uv)
         self.area = face_areas(V, F)
-        self.spread = mu_spread(F, mu_f, self.area)
+        # the mesh term of the error: none when marching with the exact per-triangle metric
+        self.spread = 0.0 if mu_mode == 'metric' else mu_spread(F, mu_f, self.area)
         self.reflex = reflex_turning(uv, F)
         self.limit = None
         if grid is None:
@@ -612,17 +846,46 @@ class Chart:
         uv, F, mu_f = self.uv, self.F, self.mu_face
         G = Grid(uv, self.size).rasterise(uv, F)
         self.valid = valid = G.rim(RIM)
-        if mu_mode == 'vertex':
+        if mu_mode in ('vertex', 'metric'):
             mu = G.interpolate(uv, F, vertex_mu(F, mu_f, self.area, len(self.V)))
         else:
             mu = G.interpolate(uv, F, face_values=mu_f)
         self.mu = np.where(valid, np.clip(mu, mu_f.min(), mu_f.max()), 1.0)
-        self.march_on = valid & ~bridging_rim(G, F, valid)
+        self.ginv = face_metric_inverse(self.V, F, uv) if mu_mode == 'metric' else None
+        if self.ginv is not None:
+            # the re-marches change nothing where every triangle is conformal and mu is the same on all
+            # of them (an isometric map of a planar mesh): skip them there
+            a, b, c = self.ginv.T
+            lv = np.log(vertex_mu(F, mu_f, self.area, len(self.V)))
+            dev = (np.abs(a - c) + 2 * np.abs(b)) / (a + c) + np.abs(lv[F] - np.log(mu_f)[:, None]).max(1)
+            if float(dev.max()) < 1e-6:
+                self.ginv = None
+        E = mean_edges(self.V, F)
+        fine = (G.h / mu_f) < 0.5 * E
+        self.gap = bridging_inside(G, F, fine)
+        self.corner_ok = sample_corners(G, F, G.coords(uv), fine)
+        self.march_on = valid & ~bridging_rim(G, F, valid) & ~self.gap
+        self.metric_passes = METRIC_PASSES if self.ginv is not None else 0
+        self.seed_metric = None
+        if self.ginv is not None:
+            a, b, c = self.ginv.T
+            det = a * c - b * b
+            self.seed_metric = (G.face, np.stack([c / det, -b / det, a / det], 1))     # G = (G^-1)^-1
+        # triangles the grid does not resolve (surface cell above UNRESOLVED times their mean edge):
+        # their vertices take on-mesh fast marching from the resolved ones (``MeshRelax``)
+        self.unresolved = unresolved_faces(mu_f, E, G.h)
+        self.free_frac = float(self.area[self.unresolved].sum() / self.area.sum())
+        self.free = None
+        if self.unresolved.any():
+            self.free = np.zeros(len(self.V), bool)
+            self.free[F[self.unresolved].ravel()] = True
+            self.relax = MeshRelax(self.V, F, np.flatnonzero(self.free[F].any(1)))
         self.inv_mu = 1.0 / self.mu
         self.grid = G
         self.P = G.coords(uv)
-        self.cell = surface_cell(mu_f, self.area, G.h)
-        self.error_estimate = error_estimate(self.cell, typical_distance(self.V), self.spread, self.reflex)
+        self.cell = surface_cell(mu_f, self.area, G.h, ~self.unresolved)
+        self.error_estimate = error_estimate(self.cell, typical_distance(self.V), self.spread, self.reflex,
+                                             self.free_frac)
         return self
 
     def node_points(self, ii, jj):
@@ -692,8 +955,11 @@ class GeodesicSolver:
     use sphere mode (``core.sphere.geodesic``) or mark seams. ``grid``: nodes along the longer UV
     side of every chart (64..4096), None: per chart from ``error_target`` (``default_grid_for_target``).
     ``solver``: 'auto' (scikit-fmm if installed, else the numpy sweep), 'skfmm' or 'sweep'.
-    ``mu_mode``: 'vertex' (per-vertex mu interpolated linearly, default) or 'face' (piecewise
-    constant). ``error_target``: the estimated mean relative error to reach (default 1e-3); a chart
+    ``mu_mode``: 'metric' (default: a first march with the per-vertex mu interpolated linearly, then
+    ``METRIC_PASSES`` re-marches with the exact per-triangle metric of the map for the previous
+    march's gradient directions, ``directional_mu``; skipped on charts where the map is an exact
+    similarity), 'vertex' (the first march only) or 'face' (piecewise constant per-triangle mu).
+    ``error_target``: the estimated mean relative error to reach (default 1e-3); a chart
     whose estimate stays above it gets a warning in every report. ``progress(fraction, message)``:
     optional callback. Raises ``ConformalError``.
 
@@ -702,7 +968,7 @@ class GeodesicSolver:
     rasterise})."""
 
     def __init__(self, V: np.ndarray, F: np.ndarray, uv: np.ndarray | None = None, boundary: str = 'uniform',
-                 grid: int | None = None, solver: str = 'auto', mu_mode: str = 'vertex',
+                 grid: int | None = None, solver: str = 'auto', mu_mode: str = 'metric',
                  seams: np.ndarray | None = None, error_target: float = ERROR_TARGET, progress=None):
         say = progress or (lambda f, msg: None)
         t0 = time.perf_counter()
@@ -767,7 +1033,7 @@ class GeodesicSolver:
             verts, Fl = np.unique(Fg, return_inverse=True)
             Fl = Fl.reshape(-1, 3)
             try:
-                ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, self.error_target)
+                ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, self.error_target, mu_mode)
             except ConformalError as exc:
                 raise (exc.with_context(f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles)")
                        if len(cuts) else exc) from None
@@ -845,7 +1111,8 @@ class GeodesicSolver:
 
         Returns ``(dist, report)``: ``dist`` (n,) float64: NaN at vertices in no triangle, inf on
         islands without a source. ``report``: grid [ny, nx] (the largest chart), cell (UV units),
-        masked_fraction, solver, sources, seed_radius (cells), marches, islands, islands_reached,
+        masked_fraction, solver, sources, seed_radius (cells), on_mesh (vertices given on-mesh fast
+        marching from the resolved ones: ``MeshRelax``), marches, metric_passes, islands, islands_reached,
         error_estimate (mean relative, dimensionless), error_target, clamped {below_euclid,
         above_edges} (vertex counts), filled_from_edges (vertices no grid node reached, given edge
         paths from their neighbours), warnings (list of str), seconds {rasterise, solve, sample,
@@ -869,6 +1136,7 @@ class GeodesicSolver:
         N = len(self.vert_of)
         dist_s = np.full(N, np.inf)
         marches, radii, reached = 0, [], 0
+        hybrid, hybrid_skipped = 0, 0
         active = np.unique(np.r_[self.chart_of_split[src_split], self.face_island[pf]]).astype(np.int64)
         for k, c in enumerate(active):
             say(0.05 + 0.85 * k / len(active), 'marching')
@@ -880,6 +1148,14 @@ class GeodesicSolver:
             src_faces = np.searchsorted(ch.faces, pf[mine]) if mine.any() else np.zeros(0, np.int64)
             d, r, nm = self._march_chart(ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius,
                                          calibrate)
+            if ch.free is not None:
+                if ch.free[loc].any() or ch.unresolved[src_faces].any():
+                    hybrid_skipped += 1
+                else:
+                    d = np.where(np.isnan(d) & ~ch.free, np.inf, d)
+                    d[ch.free] = np.inf
+                    ch.relax.relax(d, ch.free)
+                    hybrid += int(ch.free.sum())
             dist_s[ch.verts] = d
             marches += nm
             radii.append(r)
@@ -908,9 +1184,13 @@ class GeodesicSolver:
             dc = dist_s[ch.verts]
             dc = dc[np.isfinite(dc) & (dc > 0)]
             ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.spread,
-                                       ch.reflex))
+                                       ch.reflex, ch.free_frac))
         est = max(ests)
         warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w]
+        if hybrid_skipped:
+            warnings.append("a source lies where the grid does not resolve the surface (its cell is larger "
+                            "than the triangles there): distances come from the under-resolved grid; use a "
+                            "larger grid, or a more uniform map (cones, seams)")
         if filled:
             warnings.append(f"{filled} vertices lie in UV slivers thinner than a grid cell: their distances "
                             "are edge paths from their neighbours (an upper bound); use a larger grid")
@@ -925,7 +1205,9 @@ class GeodesicSolver:
         report.update({
             'grid': [ny, nx], 'cell': G.grid.h, 'masked_fraction': float(1 - G.grid.inside.mean()),
             'solver': self.solver, 'sources': int(len(X_src)), 'seed_radius': float(min(radii)),
-            'marches': marches, 'islands': len(self.charts), 'islands_reached': reached,
+            'on_mesh': hybrid, 'marches': marches,
+            'metric_passes': max(self.charts[c].metric_passes for c in active),
+            'islands': len(self.charts), 'islands_reached': reached,
             'error_estimate': est, 'clamped': clamped, 'filled_from_edges': filled, 'warnings': warnings,
             'seconds': {k: round(v, 4) for k, v in seconds.items()},
         })
@@ -952,7 +1234,7 @@ class GeodesicSolver:
         for idx in groups:
             tau = radius * G.h / float(mu_s[idx].min())
             reach = radius * float(mu_s[idx].max() / mu_s[idx].min())
-            Tloc = _local_times(G, inv_mu, valid, S[idx], reach, domain=march_on)
+            Tloc = _local_times(G, inv_mu, valid, S[idx], reach, domain=march_on, metric=ch.seed_metric)
             Tloc = self._exact_seed(ch, Tloc, tree, X_src, upper, src_local, src_faces)
             h_far = 4.0 * G.h
             phi = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * mu, h_far)
@@ -966,15 +1248,28 @@ class GeodesicSolver:
             # parts that are far apart on the surface); those get extrapolated values for sampling
             Tm, used = eikonal_march(Tloc, seed & march_on, phi, mu, ~march_on, G.h, self.solver)
             Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else np.where(seed, Tloc, Tm)
+            for _ in range(ch.metric_passes):
+                # march again with the exact per-triangle metric, for the gradient direction of the
+                # previous pass (docs/geodesic.md, "Exact metric")
+                sp_ = directional_mu(np.where(march_on, Tg, np.inf), march_on, G.face, ch.ginv)
+                phi2 = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * sp_, h_far)
+                phi2 = np.minimum(phi2, h_far)
+                phi2 = np.where(seed, np.minimum(phi2, -1e-9 * G.h), np.maximum(phi2, 1e-9 * G.h))
+                if calibrate:
+                    phi2 = calibrate_phi(phi2, valid, G.h)
+                Tm, used = eikonal_march(Tloc, seed & march_on, phi2, sp_, ~march_on, G.h, self.solver)
+                Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else np.where(seed, Tloc, Tm)
             if rim.any():
                 Tg = np.where(rim & ~seed, extrapolate_rim(Tg, march_on, rim, G.h, inv_mu), Tg)
             np.minimum(T, Tg, out=T)
-            nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=ch.P, domain=march_on)
+            nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=ch.P, domain=march_on,
+                              metric=ch.seed_metric)
             near = np.where(nv <= tau, np.fmin(near, nv), near)
         T[~valid] = np.inf
-        dist = bilinear(np.where(valid, T, np.nan), ch.P, valid)
+        sample = valid & ~ch.gap               # nodes that face a gap are no sample of either side
+        dist = bilinear(np.where(sample, T, np.nan), ch.P, sample, ch.corner_ok)
         dist = np.fmin(dist, near)
-        return dist, radius, len(groups)
+        return dist, radius, len(groups) * (1 + ch.metric_passes)
 
     def _fill_unreached(self, dist_s, charts):
         """Vertices of the ``charts`` (indices) that no grid node reached (UV slivers thinner than a
@@ -1027,7 +1322,7 @@ class GeodesicSolver:
 
 def geodesic_distance(V: np.ndarray, F: np.ndarray, sources=None, points=None, uv: np.ndarray | None = None,
                       boundary: str = 'uniform', grid: int | None = None, solver: str = 'auto',
-                      mu_mode: str = 'vertex', source_radius: float | None = None, calibrate: bool = True,
+                      mu_mode: str = 'metric', source_radius: float | None = None, calibrate: bool = True,
                       progress=None, seams: np.ndarray | None = None, clamp: bool = True,
                       error_target: float = ERROR_TARGET) -> tuple[np.ndarray, dict]:
     """Geodesic distances from a set of sources to every vertex, by fast marching on the conformal
