@@ -15,6 +15,7 @@ lengths, and extend it conformally (x harmonic, y its conjugate harmonic). Bound
 - ``uniform``: the paper's objective, the most uniform conformal factor ``mu = exp(u)``. See
   ``core.uniform``.
 """
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -96,6 +97,7 @@ class DiskSystem:
         keep = np.arange(n) != self.B[0]
         self._keep = keep
         self._II_many = None
+        self._II_lock = threading.Lock()       # the bound's thread and optimise both solve many columns
         if neumann and len(self.I):
             # L_II for the Yamabe and harmonic solves, L without one vertex for the conjugate
             self._II, self._neumann = factor_all(self.L_II, self.L[keep][:, keep])
@@ -117,8 +119,9 @@ class DiskSystem:
             return np.zeros_like(b)
         if np.ndim(b) == 2 and b.shape[1] >= MANY_RHS and self._II.backend == 'superlu' and \
                 backend() == 'cholmod':
-            if self._II_many is None:
-                self._II_many = Factor(self.L_II, 'cholmod')
+            with self._II_lock:
+                if self._II_many is None:
+                    self._II_many = Factor(self.L_II, 'cholmod')
             return self._II_many.solve(b)
         return self._II.solve(b)
 
@@ -318,6 +321,9 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     if degenerate.any():
         report['degenerate_faces'] = int(degenerate.sum())
     u = None
+    job = None
+    if boundary == 'uniform' and (bound or (bound is None and len(F) <= AUTO_BOUND_FACES)):
+        job = _BoundJob(system, mask)          # the bound needs only the system: it runs beside optimise
     t = time.perf_counter()
     if boundary == 'free':
         uv = lscm(V, system.L, system.B)
@@ -342,12 +348,14 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     if bound:
         report_progress(0.9, 'certifying the bound')
         t = time.perf_counter()
-        try:
-            report['bound_vertex'] = vertex_bound(system, real_faces=mask)
-        except ConformalError as exc:
-            report['bound_vertex'] = None
-            report['bound_note'] = str(exc)
-        timings['bound'] = time.perf_counter() - t
+        job = job or _BoundJob(system, mask, thread=False)
+        value, error, timings['bound'] = job.result()
+        timings['bound_wait'] = time.perf_counter() - t
+        report['bound_vertex'] = value
+        if error is not None:
+            report['bound_note'] = str(error)
+    elif job is not None:
+        job.result()                           # not wanted after all (the optimiser fell back)
     report_progress(0.95, 'measuring')
     Fm = F if mask is None else F[mask]
     uv = normalise_uv(V, Fm, uv, fit)
@@ -368,6 +376,41 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     timings['total'] = time.perf_counter() - t0
     report['seconds'] = {k: round(v, 4) for k, v in timings.items()}
     return FlattenResult(uv=uv, mu=mu, u=u, report=report)
+
+
+class _BoundJob:
+    """``vertex_bound(system, real_faces=mask)`` on its own thread (``thread=False``: at ``result``).
+    The bound depends only on the system, not on the optimiser's map, and most of its time is spent in
+    HiGHS and in sparse solves, which release the GIL: on two or more cores its time hides behind
+    ``optimise`` (docs/scale.md, latency). ``result()`` waits and returns (value or None, the
+    ConformalError or None, seconds the bound took); any other exception is raised there."""
+
+    def __init__(self, system, mask, thread=True):
+        self.system, self.mask = system, mask
+        self.out = None
+        self.thread = threading.Thread(target=self._run, daemon=True) if thread else None
+        if self.thread is not None:
+            self.thread.start()
+
+    def _run(self):
+        t = time.perf_counter()
+        try:
+            self.out = (vertex_bound(self.system, real_faces=self.mask), None, None)
+        except ConformalError as exc:
+            self.out = (None, exc, None)
+        except Exception as exc:               # re-raised by result() in the caller's thread
+            self.out = (None, None, exc)
+        self.seconds = time.perf_counter() - t
+
+    def result(self):
+        if self.thread is None:
+            self._run()
+        else:
+            self.thread.join()
+        value, error, unexpected = self.out
+        if unexpected is not None:
+            raise unexpected
+        return value, error, self.seconds
 
 
 def _fallback(system, V, mask):

@@ -51,6 +51,7 @@ class _RowLP:
             h.setOptionValue('output_flag', False)
             h.setOptionValue('solver', 'simplex')
             h.setOptionValue('presolve', 'on' if presolve else 'off')
+            h.setOptionValue('simplex_dual_edge_weight_strategy', 1)     # Devex: cheaper on dense rows
             inf = _highs.kHighsInf
             k = len(self.cost)
             h.addVars(k, np.where(np.isfinite(self.lo), self.lo, -inf),
