@@ -60,14 +60,22 @@ class _RowLP:
 
     def add_rows(self, A, row_lo, row_hi):
         """Add the rows ``row_lo <= A x <= row_hi``; A (r,k) dense or sparse, bounds (r,) (+-inf)."""
-        A = sp.csr_matrix(A)
         row_lo, row_hi = np.asarray(row_lo, float), np.asarray(row_hi, float)
         self.blocks.append((A, row_lo, row_hi))
-        if self.h is not None:
-            inf = _highs.kHighsInf
-            self.h.addRows(A.shape[0], np.where(np.isfinite(row_lo), row_lo, -inf),
-                           np.where(np.isfinite(row_hi), row_hi, inf), A.nnz,
-                           A.indptr[:-1].astype(np.int32), A.indices.astype(np.int32), A.data)
+        if self.h is None:
+            return
+        if sp.issparse(A):
+            A = sp.csr_matrix(A)
+            starts, index, value = A.indptr[:-1].astype(np.int32), A.indices.astype(np.int32), A.data
+        else:                                  # dense rows: CSR arrays without scipy's checks
+            A = np.asarray(A, float)
+            r, k = A.shape
+            starts = np.arange(0, r * k, k, dtype=np.int32)
+            index = np.tile(np.arange(k, dtype=np.int32), r)
+            value = np.ascontiguousarray(A).ravel()
+        inf = _highs.kHighsInf
+        self.h.addRows(len(row_lo), np.where(np.isfinite(row_lo), row_lo, -inf),
+                       np.where(np.isfinite(row_hi), row_hi, inf), len(value), starts, index, value)
 
     def solve(self):
         """The optimal ``x`` (k,), or None if the program has no optimum (infeasible, unbounded,
@@ -77,7 +85,7 @@ class _RowLP:
             if self.h.getModelStatus() != _highs.HighsModelStatus.kOptimal:
                 return None
             return np.array(self.h.getSolution().col_value)
-        A = sp.vstack([b[0] for b in self.blocks]).tocsr()
+        A = sp.vstack([sp.csr_matrix(b[0]) for b in self.blocks]).tocsr()
         lo = np.concatenate([b[1] for b in self.blocks])
         hi = np.concatenate([b[2] for b in self.blocks])
         up, dn = np.isfinite(hi), np.isfinite(lo)
