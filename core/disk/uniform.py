@@ -142,13 +142,18 @@ class _MinmaxLP:
                 np.r_[np.full(2 * K, delta), np.inf, np.inf]
         self.lp = _RowLP(cost, lo, hi)
 
-    def add(self, s, J):
-        """Add the rows of faces with model values ``s`` (r,) and responses ``J`` (r,K)."""
+    def add(self, s, J, side):
+        """Add one side of the rows of faces with model values ``s`` (r,) and responses ``J`` (r,K):
+        ``side`` +1 the upper rows (``s + J d <= t1``), -1 the lower rows (``s + J d >= t0``)."""
         r = len(s)
+        if r == 0:
+            return
         one, zero = np.ones((r, 1)), np.zeros((r, 1))
         D = J if not self.reg else np.hstack([J, -J])
-        self.lp.add_rows(np.vstack([np.hstack([D, -one, zero]), np.hstack([D, zero, -one])]),
-                         np.r_[np.full(r, -np.inf), -s], np.r_[-s, np.full(r, np.inf)])
+        if side > 0:
+            self.lp.add_rows(np.hstack([D, -one, zero]), np.full(r, -np.inf), -s)
+        else:
+            self.lp.add_rows(np.hstack([D, zero, -one]), -s, np.full(r, np.inf))
 
     def solve(self):
         """(a (K,), predicted spread) at the optimum, or (None, None)."""
@@ -168,20 +173,22 @@ def _model_lp(s, JF, c, delta, reg_w, active=200, max_rounds=6, max_add=1000, se
     worst first). Returns the best (a, model spread over all faces) seen, or (None, None).
 
     Each round's program (the rows of the active set) is solved exactly but without handing it all to
-    the solver: the solver's model starts from the ``seed`` lowest and highest faces and takes in, at
-    most ``batch`` at a time, the active-set rows its optimum violates by more than ``tol`` (relative),
-    until none does; the model is kept between rounds and re-solved from its last basis (``_RowLP``).
-    The optimum of a program is the optimum of any subset of its rows that it satisfies, so the
-    rounds see the same optima as when every active row is in the solver (bench/flatten_table.py
-    unchanged), at a fraction of the cost."""
+    the solver: the solver's model starts from the upper rows of the ``seed`` highest faces and the
+    lower rows of the ``seed`` lowest, and takes in, at most ``batch`` a side at a time, the active
+    set's rows (one side of a face: upper or lower) that its optimum violates by more than ``tol``
+    (relative), until none does; the model is kept between rounds and re-solved from its last basis
+    (``_RowLP``). The optimum of a program is the optimum of any subset of its rows that it
+    satisfies, so the rounds see the same optima as with every active row in the solver
+    (bench/flatten_table.py unchanged), at a fraction of the cost."""
     order = np.argsort(s)
     k = min(active, len(s))
     rows = np.unique(np.r_[order[:k], order[-k:]])
     lp = _MinmaxLP(JF.shape[1], c, delta, reg_w)
-    inside = np.zeros(len(s), bool)
-    first = np.unique(np.r_[order[:min(seed, k)], order[-min(seed, k):]])
-    inside[first] = True
-    lp.add(s[first], JF[first])
+    inside = {1: np.zeros(len(s), bool), -1: np.zeros(len(s), bool)}
+    q = min(seed, k)
+    for side, first in ((1, order[-q:]), (-1, order[:q])):
+        inside[side][first] = True
+        lp.add(s[first], JF[first], side)
     best = (None, None)
     for _ in range(max_rounds):
         while True:                               # the exact optimum over ``rows``
@@ -190,13 +197,15 @@ def _model_lp(s, JF, c, delta, reg_w, active=200, max_rounds=6, max_add=1000, se
                 return best
             t1, t0 = lp.bounds
             m = s[rows] + JF[rows] @ (a - c)
-            viol = np.maximum(m - t1, t0 - m)
-            out = np.nonzero((viol > tol * max(t1 - t0, 1e-12)) & ~inside[rows])[0]
-            if len(out) == 0:
+            added = 0
+            for side, viol in ((1, m - t1), (-1, t0 - m)):
+                out = np.nonzero((viol > tol * max(t1 - t0, 1e-12)) & ~inside[side][rows])[0]
+                add = rows[out[np.argsort(-viol[out])[:batch]]]
+                inside[side][add] = True
+                lp.add(s[add], JF[add], side)
+                added += len(add)
+            if not added:
                 break
-            add = rows[out[np.argsort(-viol[out])[:batch]]]
-            inside[add] = True
-            lp.add(s[add], JF[add])
         model = s + JF @ (a - c)
         spread = float(model.max() - model.min())
         if best[1] is None or spread < best[1]:
@@ -356,8 +365,10 @@ def vertex_bound(system, tol=1e-9, batch=32, max_rounds=100, real_faces=None, fl
     uI = uI / scale
     order = np.argsort(uI)
     order = order[counted[order]]
-    R = np.unique(np.r_[order[:start], order[-start:]])
-    # variables uB (nb), t1, t0; minimise t1 - t0 subject to t0 <= uB <= t1 and t0 <= u_R <= t1
+    inside = {1: np.zeros(nI, bool), -1: np.zeros(nI, bool)}
+    # variables uB (nb), t1, t0; minimise t1 - t0 subject to t0 <= uB <= t1 and t0 <= u_i <= t1 for
+    # the interior vertices taken in so far: the upper row of a vertex once it is above t1, the lower
+    # once below t0 (starting from the ``start`` highest and lowest of the area map)
     inf = np.inf
     lp = _RowLP(np.r_[np.zeros(nb), 1.0, -1.0], np.full(nb + 2, -inf), np.full(nb + 2, inf))
     Ib = sp.identity(nb, format='csr')
@@ -365,26 +376,35 @@ def vertex_bound(system, tol=1e-9, batch=32, max_rounds=100, real_faces=None, fl
     lp.add_rows(sp.vstack([sp.hstack([Ib, -one_b, zero_b]), sp.hstack([Ib, zero_b, -one_b])]),
                 np.r_[np.full(nb, -inf), np.zeros(nb)], np.r_[np.zeros(nb), np.full(nb, inf)])
 
-    def add(idx):
+    def add(hi, lo):
+        """Take in the upper rows of the vertices ``hi`` and the lower rows of ``lo``."""
+        idx = np.unique(np.r_[hi, lo])
         rows = _response_rows(system, idx)
-        K = len(idx)
-        one, zero = np.ones((K, 1)), np.zeros((K, 1))
-        lp.add_rows(np.vstack([np.hstack([rows, -one, zero]), np.hstack([rows, zero, -one])]),
-                    np.r_[np.full(K, -inf), -uI[idx]], np.r_[-uI[idx], np.full(K, inf)])
-    add(R)
+        for side, which in ((1, hi), (-1, lo)):
+            if len(which) == 0:
+                continue
+            inside[side][which] = True
+            K = len(which)
+            Rw = rows[np.searchsorted(idx, which)]
+            if side > 0:
+                lp.add_rows(np.hstack([Rw, -np.ones((K, 1)), np.zeros((K, 1))]), np.full(K, -inf), -uI[which])
+            else:
+                lp.add_rows(np.hstack([Rw, np.zeros((K, 1)), -np.ones((K, 1))]), -uI[which], np.full(K, inf))
+    add(order[-start:], order[:start])
     for _ in range(max_rounds):
         x = lp.solve()
         if x is None:
             raise ConformalError("the bound's linear program failed", 'solve_failed')
         uB, t1, t0 = x[:nb], x[nb], x[nb + 1]
         u = uI + _harmonic_interior(system, uB)
-        viol = np.where(counted, np.maximum(u - t1, t0 - u), -np.inf)
-        cand = np.setdiff1d(np.nonzero(viol > tol * max(1.0, t1 - t0))[0], R)
-        if len(cand) == 0:
+        new = []
+        for side, viol in ((1, u - t1), (-1, t0 - u)):
+            viol = np.where(counted & ~inside[side], viol, -np.inf)
+            cand = np.nonzero(viol > tol * max(1.0, t1 - t0))[0]
+            new.append(cand[np.argsort(-viol[cand])[:batch]])
+        if not len(new[0]) and not len(new[1]):
             return float(np.exp(-(t1 - t0) * scale))
-        cand = cand[np.argsort(-viol[cand])[:batch]]
-        R = np.r_[R, cand]
-        add(cand)
+        add(*new)
     return float(np.exp(-(t1 - t0) * scale))
 
 
