@@ -5,11 +5,12 @@ with the core's peak memory (measured in a child process), then scaling up to ab
     .venv/bin/python bench/speed.py [--sizes 225 400 708] [--surface bump] [--no-blender]
     .venv/bin/python bench/speed.py --latency [--small-n 65 129]     # issue 16: everyday meshes
 
-``--latency`` (issue 16): on the five test surfaces at n = 65 and 129 (8k and 33k triangles) and on a
-flat maze (a grid with slots cut in, ~9.5k triangles, ~3.2k boundary vertices), the core's own time
-(``report['seconds']['total']``) of ``area`` and of ``uniform`` with the certified bound, against
-Blender's CONFORMAL unwrap in this process; then whether splitting 32 right-hand sides over two
-threads helps the solver backend in use.
+``--latency`` (issue 16): on the five test surfaces at n = 65 and 129 (8k and 33k triangles), a flat
+maze (a grid with slots cut in, ~9.5k triangles, ~3.2k boundary vertices) and the corpus meshes that
+are disks or have islands (``CORPUS``, via ``meshes.corpus_dir()``, through ``unwrap`` with their
+seams), the core's own time of ``area`` and of ``uniform`` with the certified bound, best of
+``--repeat`` runs, against Blender's CONFORMAL unwrap in this process (best of as many); with
+``--threads``, whether splitting 32 right-hand sides over two threads helps the solver backend.
 """
 import argparse
 import json
@@ -72,29 +73,97 @@ def maze(slots=25, rows=60, corridor=3):
     return V[used], remap[F]
 
 
-def latency(sizes, blender=True):
-    """Issue 16 table: core time of area and uniform (bound included) against Blender CONFORMAL."""
+CORPUS = ['woody', 'alligator', 'suzanne', 'teapot', 'spot', 'beast', 'stanford-bunny']
+SURFACES = ['bump', 'bump3', 'edgebump', 'ridge', 'saddle']      # bench/flatten_table.py's surfaces
+
+
+def _corpus_mesh(name):
+    """(V, F, seams or None) of a corpus mesh, triangulated, seams from its OBJ UVs (bench/corpus.py)."""
+    from core.atlas.islands import seams_from_corner_ids
+    from core.io.obj import read_obj
+    from core.mesh.triangulate import triangulate
+    from meshes import corpus_dir
+    mesh = read_obj(os.path.join(corpus_dir(), f'{name}.obj'))
+    tc, _ = triangulate(mesh.corner_verts, mesh.sizes, mesh.V)
+    F = mesh.corner_verts[tc]
+    seams = None
+    if (mesh.corner_uvs >= 0).any():
+        seams = seams_from_corner_ids(F, mesh.corner_uvs[tc], len(mesh.V))
+    return mesh.V, F, seams
+
+
+def latency(sizes, blender=True, corpus=True, repeat=3, threads=False, out=None):
+    """Issue 16 table: core seconds of ``uniform`` with the certified bound (``bound=True``) against
+    Blender's CONFORMAL unwrap in this process, best of ``repeat`` runs each (the machine is shared),
+    with the bound's share, mu_ratio and the bound. Surfaces go through ``flatten`` (``area`` beside
+    it), corpus meshes through ``unwrap`` with their seams (the bound of every island; ``mu`` is the
+    worst island's). ``out``: optional path of a JSON file with every row at full precision."""
+    import json as _json
     import time
     import numpy as np
-    from core import flatten, make_surface
+    from core import flatten, make_surface, unwrap
     from core.mesh import solve
     from blender_unwrap import blender_unwrap
     print(f"solver backend: {solve.backend()}; load average {os.getloadavg()[0]:.1f} "
-          f"on {os.cpu_count()} cores")
-    print(f"{'mesh':14} {'faces':>6} {'blender s':>9} {'area s':>7} {'uniform s':>9} {'bound s':>7} "
-          f"{'uni/blender':>11} {'uni/area':>8} {'mu area':>8} {'mu uni':>8} {'bound':>8}")
-    cases = [(name, n) for n in sizes for name in ('bump', 'bump3', 'edgebump', 'ridge', 'saddle')]
-    cases.append(('maze', 0))
-    for name, n in cases:
-        V, F = maze() if name == 'maze' else make_surface(name, n)
-        base = blender_unwrap(V, F, 'CONFORMAL')[1] if blender else float('nan')
-        flatten(V, F, boundary='area')                                    # warm the imports
-        a = flatten(V, F, boundary='area').report
-        u = flatten(V, F, boundary='uniform', bound=True).report
-        ua, uu = a['seconds']['total'], u['seconds']['total']
-        print(f"{name + (f' {n}' if n else ''):14} {len(F):6d} {base:9.3f} {ua:7.3f} {uu:9.3f} "
-              f"{u['seconds'].get('bound', 0):7.3f} {uu / base:11.2f} {uu / ua:8.2f} {a['mu_ratio']:8.4f} "
-              f"{u['mu_ratio']:8.4f} {u.get('bound_vertex') or float('nan'):8.4f}", flush=True)
+          f"on {os.cpu_count()} cores; best of {repeat}")
+    print("| mesh | triangles | Blender CONFORMAL s | area s | uniform s | bound s | uniform / Blender "
+          "| mu area | mu uniform | bound |")
+    print('|---' * 10 + '|')
+    rows = []
+    cases = [('surface', name, n) for n in sizes for name in SURFACES] + [('maze', 'maze', 0)]
+    if corpus:
+        from meshes import corpus_dir
+        if os.path.isdir(corpus_dir()):
+            cases += [('corpus', name, 0) for name in CORPUS]
+        else:
+            print(f"(the corpus is missing: {os.path.abspath(corpus_dir())} does not exist; set "
+                  "CONFORMAL_MESHES; only the generated meshes are measured)")
+    for kind, name, n in cases:
+        seams = None
+        if kind == 'corpus':
+            V, F, seams = _corpus_mesh(name)
+        else:
+            V, F = maze() if kind == 'maze' else make_surface(name, n)
+        base = min(blender_unwrap(V, F, 'CONFORMAL', seams=seams)[1] for _ in range(repeat)) \
+            if blender else float('nan')
+        if kind == 'corpus':
+            unwrap(V, F, seams=seams, boundary='area')                     # warm the imports
+            ta, tu = [], []
+            for _ in range(repeat):
+                t = time.perf_counter()
+                ra = unwrap(V, F, seams=seams, boundary='area')
+                ta.append(time.perf_counter() - t)
+                t = time.perf_counter()
+                ru = unwrap(V, F, seams=seams, boundary='uniform', bound=True)
+                tu.append(time.perf_counter() - t)
+            ua, uu = min(ta), min(tu)
+            bounds = [r.get('bound_vertex') for r in ru.islands]
+            row = dict(mesh=name, faces=len(F), blender=base, area=ua, uniform=uu, bound_s=None,
+                       mu_area=ra.report['mu_ratio_worst'], mu_uniform=ru.report['mu_ratio_worst'],
+                       bound=bounds, islands=len(ru.islands))
+        else:
+            flatten(V, F, boundary='area')                                # warm the imports
+            a = min((flatten(V, F, boundary='area').report for _ in range(repeat)),
+                    key=lambda r: r['seconds']['total'])
+            u = min((flatten(V, F, boundary='uniform', bound=True).report for _ in range(repeat)),
+                    key=lambda r: r['seconds']['total'])
+            row = dict(mesh=name + (f' {n}' if n else ''), faces=len(F), blender=base,
+                       area=a['seconds']['total'], uniform=u['seconds']['total'],
+                       bound_s=u['seconds'].get('bound', 0.0), mu_area=a['mu_ratio'],
+                       mu_uniform=u['mu_ratio'], bound=u.get('bound_vertex'))
+        rows.append(row)
+        b = row['bound']
+        bs = ', '.join('-' if x is None else f'{x:.4f}' for x in b) if isinstance(b, list) else \
+            ('-' if b is None else f'{b:.4f}')
+        share = '' if row['bound_s'] is None else f"{row['bound_s']:.3f}"
+        print(f"| {row['mesh']} | {row['faces']} | {base:.3f} | {row['area']:.3f} | {row['uniform']:.3f} | "
+              f"{share} | {row['uniform'] / base:.2f} | {row['mu_area']:.4f} | {row['mu_uniform']:.4f} "
+              f"| {bs} |", flush=True)
+    if out:
+        with open(out, 'w') as fh:
+            _json.dump(rows, fh, indent=1)
+    if not threads:
+        return
     # threads: does splitting many right-hand sides over two threads help the backend in use?
     V, F = make_surface('bump', 450)
     from core.disk.flatten import DiskSystem
@@ -123,9 +192,14 @@ def main():
                     help='run Blender\'s unwrap only up to this grid size (it is slow)')
     ap.add_argument('--latency', action='store_true', help='issue 16 everyday-mesh table (see above)')
     ap.add_argument('--small-n', type=int, nargs='*', default=[65, 129])
+    ap.add_argument('--no-corpus', action='store_true', help='--latency: generated meshes only')
+    ap.add_argument('--repeat', type=int, default=3, help='--latency: best of this many runs')
+    ap.add_argument('--threads', action='store_true', help='--latency: also the two-thread solve test')
+    ap.add_argument('--json', help='--latency: write the rows at full precision to this file')
     args = ap.parse_args()
     if args.latency:
-        latency(args.small_n, blender=not args.no_blender)
+        latency(args.small_n, blender=not args.no_blender, corpus=not args.no_corpus, repeat=args.repeat,
+                threads=args.threads, out=args.json)
         return
     print(f"{'n':>5} {'faces':>9} {'mode':8} {'seconds':>8} {'peak MB':>8} {'mu_ratio':>8} "
           f"{'qc_mean':>8} {'flips':>5} {'vs Blender CONFORMAL':>21}")

@@ -214,3 +214,97 @@ def test_intrinsic_operators_do_not_regress_smooth_surfaces():
     assert auto['operators']['intrinsic'] and auto['operators']['negative_after'] < \
         auto['operators']['negative_before']
     assert auto['mu_ratio'] >= ext['mu_ratio'] * 0.99 and auto['flips'] == 0
+
+
+# --- issue 16: the faster linear programs of `uniform` give the same answers --------------------------
+
+def _disk_system(name, n):
+    from core.disk.flatten import DiskSystem
+    from core.mesh.validate import check_mesh, normalise_scale
+    V, F = make_surface(name, n)
+    V, _ = normalise_scale(V)
+    return DiskSystem(V, F, check_mesh(V, F, kind='disk', max_faces=None).boundary)
+
+
+@pytest.mark.parametrize('name', ['edgebump', 'bump3'])
+def test_bound_equals_the_whole_linear_program(name):
+    """vertex_bound (active set, warm-started rows) equals the program with every interior vertex's
+    row in it at once (docs/math.md §2), solved independently by scipy's linprog."""
+    from scipy.optimize import linprog
+    from core.disk.uniform import vertex_bound
+    system = _disk_system(name, 21)
+    nb, nI = len(system.B), len(system.I)
+    uI = system.yamabe(np.zeros(nb))[system.I]
+    R = -system.solve_II(system.L_IB.toarray())             # (nI, nb) interior response, all rows
+    np.testing.assert_allclose(R.sum(1), 1.0, atol=1e-9)     # harmonic: constants are reproduced
+    one_b, zero_b = np.ones((nb, 1)), np.zeros((nb, 1))
+    one_i, zero_i = np.ones((nI, 1)), np.zeros((nI, 1))
+    A = np.block([[np.eye(nb), -one_b, zero_b], [-np.eye(nb), zero_b, one_b],
+                  [R, -one_i, zero_i], [-R, zero_i, one_i]])
+    ref = linprog(np.r_[np.zeros(nb), 1.0, -1.0], A_ub=A, b_ub=np.r_[np.zeros(2 * nb), -uI, uI],
+                  bounds=[(None, None)] * (nb + 2), method='highs')
+    assert ref.status == 0
+    assert vertex_bound(system) == pytest.approx(np.exp(-ref.fun), rel=1e-7)
+    # the area map (u_B = 0) is feasible, so the bound is at least its vertex ratio
+    assert vertex_bound(system) >= np.exp(-(max(uI.max(), 0.0) - min(uI.min(), 0.0))) - 1e-12
+
+
+def test_model_lp_equals_every_row_at_once():
+    """_model_lp hands the solver only the rows its optimum violates; each round's answer is the
+    optimum of the round's whole active set (here: solved with every active row by linprog)."""
+    from scipy.optimize import linprog
+    from core.disk.uniform import _model_lp
+    rng = np.random.default_rng(7)
+    m, K = 3000, 8
+    x = rng.uniform(-1, 1, (m, 2))                            # a smooth model, like the response rows
+    freq = np.r_[np.arange(1, K // 2 + 1), np.arange(1, K // 2 + 1)].astype(float)
+    JF = np.concatenate([np.cos(np.outer(x[:, 0] + 0.3 * x[:, 1], freq[:K // 2])),
+                         np.sin(np.outer(x[:, 1] - 0.2 * x[:, 0], freq[K // 2:]))], axis=1)
+    s = np.exp(-4 * (x ** 2).sum(1)) + 0.3 * x[:, 0]
+    c, delta = np.zeros(K), 0.5
+    reg_w = 1e-3 * freq
+    a, spread = _model_lp(s, JF, c, delta, reg_w, active=50, max_rounds=1)
+    order = np.argsort(s)
+    rows = np.unique(np.r_[order[:50], order[-50:]])
+    J, r = JF[rows], len(rows)
+    one, zero = np.ones((r, 1)), np.zeros((r, 1))
+    ref = linprog(np.r_[reg_w, reg_w, 1.0, -1.0],
+                  A_ub=np.vstack([np.hstack([J, -J, -one, zero]), np.hstack([-J, J, zero, one])]),
+                  b_ub=np.r_[-s[rows], s[rows]], bounds=[(0, delta)] * (2 * K) + [(None, None)] * 2,
+                  method='highs-ds')
+    a_ref = ref.x[:K] - ref.x[K:2 * K]
+    np.testing.assert_allclose(a, a_ref, atol=1e-7)
+    model = s + JF @ a_ref
+    assert spread == pytest.approx(model.max() - model.min(), rel=1e-7)
+    # several rounds: the model spread over all faces never gets worse than the first round's
+    a2, spread2 = _model_lp(s, JF, c, delta, reg_w, active=50)
+    assert spread2 <= spread + 1e-12
+
+
+def test_uniform_same_without_highspy(monkeypatch):
+    """Without highspy every round is solved from scratch by scipy's linprog: the same bound and map."""
+    import core.disk.uniform as uniform
+    V, F = make_surface('ridge', 33)
+    fast = flatten(V, F, boundary='uniform', bound=True).report
+    monkeypatch.setattr(uniform, '_highs', None)
+    slow = flatten(V, F, boundary='uniform', bound=True).report
+    assert slow['bound_vertex'] == pytest.approx(fast['bound_vertex'], rel=1e-7)
+    assert slow['mu_ratio'] == pytest.approx(fast['mu_ratio'], rel=1e-6)
+    assert slow['qc_mean'] == pytest.approx(fast['qc_mean'], rel=1e-6)
+
+
+def test_bound_on_its_thread_is_the_bound():
+    """flatten computes the bound beside optimise: the value is vertex_bound's, and an error of the
+    bound's program still comes back as a note (not an exception) with the map."""
+    from core.disk.uniform import vertex_bound
+    V, F = make_surface('saddle', 33)
+    r = flatten(V, F, boundary='uniform', bound=True).report
+    assert r['bound_vertex'] == pytest.approx(vertex_bound(_disk_system('saddle', 33)), rel=1e-9)
+    assert r['seconds']['bound'] >= 0 and r['seconds']['bound_wait'] >= 0
+    assert r['mu_ratio'] <= 1 and r['flips'] == 0
+    # a nearly flat mesh: the bound's program is not solved, the note says why
+    Vf = V.copy()
+    Vf[:, 2] *= 1e-2
+    r = flatten(Vf, F, boundary='uniform', bound=True).report
+    assert r['bound_vertex'] is None and 'nearly flat' in r['bound_note']
+    assert not r['warnings'] or all('bound' not in w for w in r['warnings'])

@@ -15,6 +15,7 @@ lengths, and extend it conformally (x harmonic, y its conjugate harmonic). Bound
 - ``uniform``: the paper's objective, the most uniform conformal factor ``mu = exp(u)``. See
   ``core.uniform``.
 """
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -25,7 +26,7 @@ from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian, face_gradients, gradient, divergence
 from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians, signed_uv_areas
 from ..mesh.intrinsic import intrinsic_delaunay
-from ..mesh.solve import Factor, factor_all, fill_order, sub_order
+from ..mesh.solve import Factor, backend, factor_all, fill_order, sub_order
 from .lscm import lscm
 from .uniform import optimise, vertex_bound
 from ..mesh.validate import check_mesh, degenerate_faces, normalise_scale, DEFAULT_MAX_FACES
@@ -34,6 +35,7 @@ BOUNDARY_MODES = ('free', 'area', 'uniform')
 FIT_MODES = ('true_scale', 'unit_square')
 OPERATOR_MODES = ('auto', 'intrinsic', 'extrinsic')
 AUTO_BOUND_FACES = 20_000      # above this the certified bound is computed only on request
+MANY_RHS = 8                   # solve_II: from this many right-hand sides on, a CHOLMOD factor of L_II
 QC_WARN = 1.5                  # a map with qc_mean above this gets a warning
 MU_WARN = 1e-4                 # ... and one with mu_ratio below this (texel density varies 10^4-fold)
 
@@ -94,6 +96,8 @@ class DiskSystem:
         self.L_IB = LI[:, self.B].tocsc()
         keep = np.arange(n) != self.B[0]
         self._keep = keep
+        self._II_many = None
+        self._II_lock = threading.Lock()       # the bound's thread and optimise both solve many columns
         if neumann and len(self.I):
             # L_II for the Yamabe and harmonic solves, L without one vertex for the conjugate; on big
             # meshes both in one nested dissection order of the vertices (docs/scale.md)
@@ -109,9 +113,20 @@ class DiskSystem:
 
     # --- step 2: interior log scale factors -----------------------------------------------------
     def solve_II(self, b):
-        """``L_II^-1 b`` for (nI,) or (nI,r) ``b``."""
+        """``L_II^-1 b`` for (nI,) or (nI,r) ``b``. From ``MANY_RHS`` columns on, when ``L_II`` is
+        factored by SuperLU and CHOLMOD is available, a CHOLMOD factor of ``L_II`` (made once, on first
+        use) solves instead: scipy's SuperLU solves many columns 5-15x slower than CHOLMOD (at 16k
+        interior vertices, 64 columns: 0.9-1.5 s against 0.1 s), which is what ``uniform``'s response
+        solves need (docs/scale.md, latency). Not on big meshes factored in a nested dissection order
+        (``Factor.ordering == 'given'``): there a second factorisation would cost more than it saves."""
         if self._II is None:
             return np.zeros_like(b)
+        if np.ndim(b) == 2 and b.shape[1] >= MANY_RHS and self._II.backend == 'superlu' and \
+                self._II.ordering != 'given' and backend() == 'cholmod':
+            with self._II_lock:
+                if self._II_many is None:
+                    self._II_many = Factor(self.L_II, 'cholmod')
+            return self._II_many.solve(b)
         return self._II.solve(b)
 
     def yamabe(self, uB):
@@ -310,6 +325,9 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     if degenerate.any():
         report['degenerate_faces'] = int(degenerate.sum())
     u = None
+    job = None
+    if boundary == 'uniform' and (bound or (bound is None and len(F) <= AUTO_BOUND_FACES)):
+        job = _BoundJob(system, mask)          # the bound needs only the system: it runs beside optimise
     t = time.perf_counter()
     if boundary == 'free':
         uv = lscm(V, system.L, system.B)
@@ -334,12 +352,14 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     if bound:
         report_progress(0.9, 'certifying the bound')
         t = time.perf_counter()
-        try:
-            report['bound_vertex'] = vertex_bound(system, real_faces=mask)
-        except ConformalError as exc:
-            report['bound_vertex'] = None
-            report['bound_note'] = str(exc)
-        timings['bound'] = time.perf_counter() - t
+        job = job or _BoundJob(system, mask, thread=False)
+        value, error, timings['bound'] = job.result()
+        timings['bound_wait'] = time.perf_counter() - t
+        report['bound_vertex'] = value
+        if error is not None:
+            report['bound_note'] = str(error)
+    elif job is not None:
+        job.result()                           # not wanted after all (the optimiser fell back)
     report_progress(0.95, 'measuring')
     Fm = F if mask is None else F[mask]
     uv = normalise_uv(V, Fm, uv, fit)
@@ -360,6 +380,41 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     timings['total'] = time.perf_counter() - t0
     report['seconds'] = {k: round(v, 4) for k, v in timings.items()}
     return FlattenResult(uv=uv, mu=mu, u=u, report=report)
+
+
+class _BoundJob:
+    """``vertex_bound(system, real_faces=mask)`` on its own thread (``thread=False``: at ``result``).
+    The bound depends only on the system, not on the optimiser's map, and most of its time is spent in
+    HiGHS and in sparse solves, which release the GIL: on two or more cores its time hides behind
+    ``optimise`` (docs/scale.md, latency). ``result()`` waits and returns (value or None, the
+    ConformalError or None, seconds the bound took); any other exception is raised there."""
+
+    def __init__(self, system, mask, thread=True):
+        self.system, self.mask = system, mask
+        self.out = None
+        self.thread = threading.Thread(target=self._run, daemon=True) if thread else None
+        if self.thread is not None:
+            self.thread.start()
+
+    def _run(self):
+        t = time.perf_counter()
+        try:
+            self.out = (vertex_bound(self.system, real_faces=self.mask), None, None)
+        except ConformalError as exc:
+            self.out = (None, exc, None)
+        except Exception as exc:               # re-raised by result() in the caller's thread
+            self.out = (None, None, exc)
+        self.seconds = time.perf_counter() - t
+
+    def result(self):
+        if self.thread is None:
+            self._run()
+        else:
+            self.thread.join()
+        value, error, unexpected = self.out
+        if unexpected is not None:
+            raise unexpected
+        return value, error, self.seconds
 
 
 def _fallback(system, V, mask):
