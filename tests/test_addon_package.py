@@ -53,11 +53,12 @@ def test_zip_layout_and_manifest(built_zip):
     assert lo <= tuple(bpy.app.version) < hi
     assert manifest['platforms'] == ['linux-x64']
     wheels = sorted(os.path.basename(w) for w in manifest['wheels'])
-    assert len(wheels) == 3
+    assert len(wheels) == 4
     abi = f'{CP}-{CP}' if CP == 'cp311' else 'cp312-abi3'        # cholespy's stable-ABI wheel for 3.13
     assert wheels[0].startswith(f'cholespy-2.2.0-{abi}-') and 'manylinux' in wheels[0]
-    assert wheels[1].startswith(f'scikit_fmm-2025.6.23-{CP}-{CP}-') and wheels[1].endswith('linux_x86_64.whl')
-    assert wheels[2].startswith(f'scipy-1.15.3-{CP}-{CP}-') and 'manylinux' in wheels[2]
+    assert wheels[1].startswith(f'highspy-1.16.0-{CP}-{CP}-') and 'manylinux' in wheels[1]
+    assert wheels[2].startswith(f'scikit_fmm-2025.6.23-{CP}-{CP}-') and wheels[2].endswith('linux_x86_64.whl')
+    assert wheels[3].startswith(f'scipy-1.15.3-{CP}-{CP}-') and 'manylinux' in wheels[3]
     assert {'wheels/' + w for w in wheels} <= set(names)
     assert len(tomllib.loads(open(os.path.join(ROOT, 'blender_manifest.toml')).read()).get('wheels', [])) == 0
     assert len(manifest['tagline']) <= 64 and manifest['tagline'][-1].isalnum()
@@ -169,7 +170,7 @@ def test_blender_installs_zip_and_runs_operators(built_zip, tmp_path):
     assert res['colormap'] == 'PERCEPTUAL'
     # the zip's wheels were unpacked for this Python
     assert res['site'] == [f'python{PY}/site-packages']
-    assert {'scipy', 'skfmm', 'cholespy'} <= set(res['site_modules'])
+    assert {'scipy', 'skfmm', 'cholespy', 'highspy'} <= set(res['site_modules'])
     assert res['cholmod'] == 'cholmod'
     assert res['flatten']['flips'] == 0 and res['flatten']['triangles'] == 2 * 12 * 12
     assert {'conformal_factor', 'conformal_factor_color', 'UVMap'} <= set(res['flatten_attrs'])

@@ -149,7 +149,8 @@ def fetch_wheels(wheel_dir, python='3.11', platforms=None, log=print):
             _download(wheel_dir, f'scipy=={scipy_v}', python, PLATFORMS[plat])
         if not scipy_here():
             raise PackageError(f"no scipy {scipy_v} wheel for {plat}, Python {python}")
-        out[plat] = [scipy_here()[0]] + _cholespy(wheel_dir, python, plat, log)
+        out[plat] = [scipy_here()[0]] + _cholespy(wheel_dir, python, plat, log) + \
+            _highspy(wheel_dir, python, plat, log)
     # scikit-fmm: Windows wheel from PyPI (cp311 only), Linux wheel built from the sdist, none for macOS.
     if 'windows-x64' in out:
         win = have(wheel_dir, f'scikit_fmm-{fmm_v}-{cp}-*win_amd64.whl')
@@ -195,6 +196,32 @@ def _cholespy(wheel_dir, python, plat, log):
             _download(wheel_dir, f'cholespy=={v}', python, CHOLESPY_TAGS[plat])
         except PackageError as exc:
             log(f"  no cholespy wheel for {plat}, Python {python}: SuperLU will be used ({exc})")
+    return here()[:1]
+
+
+HIGHSPY_TAGS = {    # highspy's wheels: manylinux_2_28 (also tagged 2_24), and per-Python macOS minimums
+    'linux-x64': ['manylinux_2_28_x86_64', 'manylinux_2_24_x86_64'],
+    'windows-x64': ['win_amd64'],
+    'macos-arm64': ['macosx_11_0_arm64'],
+    'macos-x64': ['macosx_10_9_x86_64', 'macosx_10_13_x86_64'],
+}
+
+
+def _highspy(wheel_dir, python, plat, log):
+    """The highspy wheel (HiGHS's own binding: ``uniform``'s warm-started linear programs,
+    core.disk.uniform) for ``plat`` and ``python``. Returns [path], or [] with a note when PyPI has none
+    (the core then solves the same programs with scipy's HiGHS, from scratch each round)."""
+    v = pinned('highspy')
+    cp = 'cp' + python.replace('.', '')
+
+    def here():
+        return [w for w in have(wheel_dir, f'highspy-{v}-{cp}-{cp}-*.whl') if _wheel_platform_matches(w, plat)]
+    if not here():
+        log(f"downloading highspy {v} for {plat}, Python {python}")
+        try:
+            _download(wheel_dir, f'highspy=={v}', python, HIGHSPY_TAGS[plat])
+        except PackageError as exc:
+            log(f"  no highspy wheel for {plat}, Python {python}: scipy's linprog will be used ({exc})")
     return here()[:1]
 
 
