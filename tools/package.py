@@ -215,7 +215,8 @@ def _highspy(wheel_dir, python, plat, log):
     cp = 'cp' + python.replace('.', '')
 
     def here():
-        return [w for w in have(wheel_dir, f'highspy-{v}-{cp}-{cp}-*.whl') if _wheel_platform_matches(w, plat)]
+        return [w for w in have(wheel_dir, f'highspy-{v}-{cp}-{cp}-*.whl')
+                if _wheel_platform_matches(w, plat)]
     if not here():
         log(f"downloading highspy {v} for {plat}, Python {python}")
         try:
