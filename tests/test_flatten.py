@@ -308,3 +308,21 @@ def test_bound_on_its_thread_is_the_bound():
     r = flatten(Vf, F, boundary='uniform', bound=True).report
     assert r['bound_vertex'] is None and 'nearly flat' in r['bound_note']
     assert not r['warnings'] or all('bound' not in w for w in r['warnings'])
+
+
+def test_uniform_is_invariant_to_vertex_order_face_order_rigid_motion_and_scale():
+    """``uniform``'s optimum is a whole face of equally good maps; which one it returns must not depend
+    on the numbering (its boundary basis starts at a vertex chosen by the geometry). A jitter breaks the
+    surface's mirror symmetry, where no geometric start can tell the mirrored corners apart."""
+    from scipy.spatial.transform import Rotation
+    V, F = make_surface('edgebump', 33)[:2]
+    rng = np.random.default_rng(5)
+    V = V + 1e-3 * rng.standard_normal(V.shape) * [1, 1, 0]
+    r0 = flatten(V, F, boundary='uniform')
+    p = rng.permutation(len(V))
+    inv = np.argsort(p)
+    fp = rng.permutation(len(F))
+    R = Rotation.random(random_state=3).as_matrix()
+    r1 = flatten(2.5 * V[p] @ R.T + [3.0, -1.0, 7.0], inv[F][fp], boundary='uniform')
+    assert abs(r1.report['mu_ratio'] / r0.report['mu_ratio'] - 1) < 1e-9
+    assert np.abs(np.log(r1.mu) - np.log(r0.mu[fp])).max() < 1e-8

@@ -26,13 +26,16 @@ def conformal_energy_matrix(L, loop):
 
 def lscm(V, L, loop):
     """Free-boundary conformal map. ``V`` (n,3), ``L`` cotan Laplacian, ``loop`` outer boundary.
-    Returns UV (n,2), with the two boundary vertices farthest apart pinned at (0,0) and (d,0), where
-    d is their 3D distance."""
+    Returns UV (n,2), with two boundary vertices far apart pinned at (0,0) and (d,0), where d is their
+    3D distance. LSCM's map depends on its pins (on ridge, n = 65, the two diagonals of the square give
+    mu_ratio 0.086 and 0.060); they are found from the lowest-numbered boundary vertex, whatever the
+    loop's start, so ``free`` is the same baseline it always was (it depends on the numbering, as every
+    two-pin LSCM does, Blender's included)."""
     n = len(V)
     Q = conformal_energy_matrix(L, loop)
     P = V[loop]
-    # two pins far apart: the farthest from the first, then the farthest from that one
-    a = loop[np.argmax(np.linalg.norm(P - P[0], axis=1))]
+    # two pins far apart: the farthest from the lowest-numbered one, then the farthest from that one
+    a = loop[np.argmax(np.linalg.norm(P - V[loop.min()], axis=1))]
     b = loop[np.argmax(np.linalg.norm(P - V[a], axis=1))]
     d = np.linalg.norm(V[a] - V[b])
     pinned = np.array([a, b, n + a, n + b])
