@@ -130,6 +130,18 @@ def _read_lines(path):
 _SP, _TAB, _NL, _SLASH, _MINUS = 32, 9, 10, 47, 45
 
 
+def _parse_numbers(sub, dtype):
+    """The whitespace-separated numbers of the byte array ``sub`` as a (k,) ``dtype`` array, or None
+    where one does not parse. numpy 1.x stops at a bad number with a warning (the caller then sees too
+    few values); numpy 2.x raises ValueError."""
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')        # numpy 1.x warns where it stops on a bad number
+        try:
+            return np.fromstring(sub.tobytes(), dtype=dtype, sep=' ')
+        except ValueError:
+            return None
+
+
 def _line_bytes(buf, starts, ends, pick):
     """The bytes of the lines ``pick`` (bool per line) of ``buf`` (uint8), each ending in a newline,
     concatenated (uint8), and the offsets of their first bytes in that array."""
@@ -195,10 +207,8 @@ def _read_fast(data):
             return None
         v_text = sub.tobytes()
         sub[first] = _SP
-        with warnings.catch_warnings():
-            warnings.simplefilter('ignore')        # numpy warns where it stops on a bad number
-            V = np.fromstring(sub.tobytes(), dtype=np.float64, sep=' ')
-        if len(V) != 3 * nv:
+        V = _parse_numbers(sub, np.float64)
+        if V is None or len(V) != 3 * nv:
             return None
     else:
         V, v_text = np.zeros(0), b''
@@ -222,10 +232,8 @@ def _read_fast(data):
                 (len(mpos) and not (brk[mpos - 1].all() and digit[mpos + 1].all())):
             return None
         sub[slash] = _SP
-        with warnings.catch_warnings():
-            warnings.simplefilter('ignore')
-            val = np.fromstring(sub.tobytes(), dtype=np.int64, sep=' ')
-        if len(val) != len(run):
+        val = _parse_numbers(sub, np.int64)
+        if val is None or len(val) != len(run):
             return None
         f0 = ws[run - 1]                           # the first field of a token (the v index)
         f1 = np.zeros(len(run), bool)              # the second (vt): one slash after a first field
