@@ -41,6 +41,7 @@ from ..mesh import topology
 from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.intrinsic import corner_angles as corner_angles_l
 from ..mesh.intrinsic import corner_cotangents as corner_cotangents_l
+from ..mesh.intrinsic import face_areas as face_areas_l
 from ..mesh.intrinsic import intrinsic_delaunay, layout
 from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, singular_values
@@ -442,6 +443,65 @@ def _boundary_data(Vc, Fc, loop, uc, vert_of=None, Lu=None, cache=None):
     return kt, lt, L
 
 
+def _flip_edge(T, e):
+    """Flip the interior edge ``e`` of the intrinsic triangulation ``T`` in place (faces ``t = (a, b, c)``
+    and ``s = (d, c, b)`` with ``e = b-c`` become ``(a, b, d)`` and ``(d, c, a)``), if the quad
+    ``a, b, d, c`` is convex in the intrinsic metric (angles at ``b`` and ``c`` below ``pi``). Returns
+    whether it flipped."""
+    F, FE, EF, EC, el = T.F, T.FE, T.EF, T.EC, T.edge_lengths
+    t, k, s, j = int(EF[e, 0]), int(EC[e, 0]), int(EF[e, 1]), int(EC[e, 1])
+    if s < 0 or t == s or F[t, k] == F[s, j]:
+        return False
+    nx, pv = (1, 2, 0), (2, 0, 1)
+    k1, k2, j1, j2 = nx[k], pv[k], nx[j], pv[j]
+    ang_t, ang_s = corner_angles_l(el[FE[t]][None])[0], corner_angles_l(el[FE[s]][None])[0]
+    # b = F[t, k1] = F[s, j2], c = F[t, k2] = F[s, j1]
+    if ang_t[k1] + ang_s[j2] >= np.pi - 1e-6 or ang_t[k2] + ang_s[j1] >= np.pi - 1e-6:
+        return False
+    l_e, l_ca, l_ab = el[e], el[FE[t, k1]], el[FE[t, k2]]
+    l_bd, l_dc = el[FE[s, j1]], el[FE[s, j2]]
+    At = face_areas_l(np.array([[l_e, l_ca, l_ab]]))[0]
+    As = face_areas_l(np.array([[l_e, l_bd, l_dc]]))[0]
+    xa, xd = (l_ab ** 2 - l_ca ** 2 + l_e ** 2) / (2 * l_e), (l_bd ** 2 - l_dc ** 2 + l_e ** 2) / (2 * l_e)
+    l_new = float(np.hypot(xa - xd, 2 * At / l_e + 2 * As / l_e))
+    a, d = F[t, k], F[s, j]
+    e_ca, e_bd = FE[t, k1], FE[s, j1]
+    side_bd = 0 if (EF[e_bd, 0] == s and EC[e_bd, 0] == j1) else 1
+    side_ca = 0 if (EF[e_ca, 0] == t and EC[e_ca, 0] == k1) else 1
+    F[t, k2], F[s, j2] = d, a
+    FE[t, k], FE[t, k1], FE[s, j], FE[s, j1] = e_bd, e, e_ca, e
+    EF[e_bd, side_bd], EC[e_bd, side_bd] = t, k
+    EF[e_ca, side_ca], EC[e_ca, side_ca] = s, j
+    EF[e, 0], EC[e, 0], EF[e, 1], EC[e, 1] = t, k1, s, j1
+    el[e] = l_new
+    return True
+
+
+def raise_low_degree(T):
+    """Give every interior vertex of degree below 3 of the intrinsic triangulation ``T`` (in place) a
+    third edge, by flipping an edge opposite it. Intrinsic Delaunay flips can leave a vertex of
+    positive curvature with two triangles only (cow: a vertex of degree 3 and angle sum 3.9 rad); a
+    flat metric then needs both triangles' angles there to be ``pi`` (degenerate), so Newton on the
+    exact metric cannot converge and a harmonic layout puts the vertex on a segment (a squashed input
+    triangle). Returns the number of flips (0 on most meshes: the vertices are found by one
+    ``bincount``)."""
+    deg = np.bincount(T.F.ravel(), minlength=T.n)
+    onb = np.zeros(T.n, bool)
+    bnd = T.EF[:, 1] < 0
+    onb[T.edge_vertices()[bnd].ravel()] = True
+    low = np.nonzero((deg > 0) & (deg < 3) & ~onb)[0]
+    flips = 0
+    for v in low:
+        for t in np.nonzero((T.F == v).any(1))[0]:
+            k = int(np.nonzero(T.F[t] == v)[0][0])
+            if _flip_edge(T, int(T.FE[t, k])):
+                flips += 1
+                break
+    if flips:
+        T.report['flips'] = T.report.get('flips', 0) + flips
+    return flips
+
+
 def _disk_laplacian(Vc, Fc, cache=None):
     """The cut disk's Laplacian (N,N), for its boundary data and for the UVs' harmonic extension:
     the intrinsic Delaunay cotan Laplacian of the cut disk (its boundary, i.e. the cut, is never
@@ -451,6 +511,7 @@ def _disk_laplacian(Vc, Fc, cache=None):
     if cache is not None and cache.get('disk_key') == key:
         return cache['disk']
     T = intrinsic_delaunay(Vc, Fc, mollify_delta=0.0)
+    T.report['degree_flips'] = raise_low_degree(T)
     L = T.cotan_laplacian().tocsr() if T.report['flips'] else cotan_laplacian(Vc, Fc)
     if cache is not None:
         cache['disk_key'], cache['disk'], cache['disk_T'] = key, L, T
