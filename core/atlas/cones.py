@@ -63,6 +63,7 @@ L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (pla
 REFACTOR = 0.5                     # Newton: factor the Hessian again when |r| fell by less than this
 CORRECTIONS = 2                    # fixed-point steps of the angles for the exact metric's log scale
 MAX_SPLITS = 10                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
+CORNER_MARGIN = 0.15              # a cone's corners are kept this far below pi (rad): kappa_floor
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 
 
@@ -125,6 +126,15 @@ class ConeSystem:
         self.u0 = self.solve(-self.Omega)
         # per-vertex area (a third of the incident triangles), for area-weighted statistics
         self.vertex_area = np.bincount(F.ravel(), np.repeat(self.A / 3, 3), minlength=n)
+        # a negative cone widens its corners by about (2*pi - kappa) / (angle sum): an obtuse corner
+        # (a needle's) at a cone must stay below pi - CORNER_MARGIN, or the input triangle comes out
+        # reflex and flips (cheburashka). Lower bound per vertex on kappa, (n,) radians.
+        from ..mesh.geometry import corner_angles
+        theta_max = np.zeros(n)
+        np.maximum.at(theta_max, F.ravel(), corner_angles(V, F).ravel())
+        with np.errstate(divide='ignore', invalid='ignore'):
+            floor = 2 * np.pi - (2 * np.pi - self.Omega) * (np.pi - CORNER_MARGIN) / theta_max
+        self.kappa_floor = np.where(np.isfinite(floor), floor, -np.inf)
 
     def solve(self, b):
         """Grounded solve: x (n,) or (n,r) with ``(L x)_free = b_free`` and x = 0 on the fixed set."""
@@ -178,8 +188,8 @@ class ConeSystem:
         k = len(S)
         if k == 0:
             return np.zeros(0)
-        lo = L2_BOUNDS[0] if lower is None else lower
-        hi = L2_BOUNDS[1] if upper is None else upper
+        lo = np.maximum(L2_BOUNDS[0] if lower is None else lower, self.kappa_floor[S])
+        hi = np.maximum(L2_BOUNDS[1] if upper is None else upper, lo)
         w = self.vertex_area / self.vertex_area.sum()
         A = np.c_[self.columns(S), -np.ones(self.n)]            # u - c = u0 + A [kappa; c]
         M = A.T @ (w[:, None] * A)
@@ -194,10 +204,12 @@ class ConeSystem:
             big = 1e3 * np.sqrt(ev.max())
             R = np.r_[R, big * np.r_[np.ones(k), 0.0][None]]
             b = np.r_[b, big * self.total]
-        bl = np.r_[np.full(k, lo), -np.inf]
-        bu = np.r_[np.full(k, hi), np.inf]
-        if self.needs_sum and k * hi < self.total:
-            bu[:k] = self.total / k + 1e-9
+        bl = np.r_[np.broadcast_to(lo, (k,)), -np.inf]
+        bu = np.r_[np.broadcast_to(hi, (k,)), np.inf]
+        if self.needs_sum and bu[:k].sum() < self.total:
+            bu[:k] = np.maximum(bu[:k], self.total / k + 1e-9)
+        if self.needs_sum and bl[:k].sum() > self.total:
+            bl[:k] = np.minimum(bl[:k], self.total / k - 1e-9)
         x = lsq_linear(R, b, bounds=(bl, bu), method='bvls').x
         kap = x[:k]
         if self.needs_sum:
@@ -225,6 +237,7 @@ class ConeSystem:
         if self.needs_sum and k * KAPPA_MAX < self.total - 1e-9:
             return None, np.inf
         lower = np.full(k, KAPPA_MIN) if lower is None else np.asarray(lower, np.float64)
+        lower = np.minimum(np.maximum(lower, self.kappa_floor[S]), KAPPA_MAX)
         if rows is None:
             rows = ~self.rings(S, 1)
         idx = np.nonzero(rows)[0]
@@ -699,20 +712,40 @@ def _harmonic(L, loop, PB, cache=None):
     return X
 
 
-def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS):
+def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS, Vc=None):
     """Local repair of an exact layout ``uv`` (N,2), in place: the input triangles are laid out with
     straight edges between the vertices of the intrinsic triangulation, so a needle triangle can come
     out flipped or flat. The vertices within ``1 + round`` rings of such triangles (not on the cut
-    disk's boundary ``loop``, so seam copies stay congruent) are re-placed by the harmonic map with
-    nonnegative weights (``clamped_laplacian`` of ``Lc``, a convex combination of the neighbours).
+    disk's boundary ``loop``, so seam copies stay congruent) are re-placed by a map with nonnegative
+    weights (a convex combination of the neighbours). With ``Vc`` (N,3) the weights live on the input
+    triangles ``Fc`` themselves (their cotan weights clamped at 0, plus a small uniform weight that
+    keeps every vertex attached), whose orientation is what gets measured; without it, on the
+    intrinsic ``Lc`` (``clamped_laplacian``). The layout with the fewest folded triangles is kept.
     Returns the number of rounds used."""
+    import scipy.sparse as sp
     N = len(uv)
     onb = np.zeros(N, bool)
     onb[loop] = True
     adj = None
+    if Vc is not None:
+        W = -clamped_laplacian(cotan_laplacian(Vc, Fc), np.ones(N, bool))
+        W.setdiag(0)
+        W.eliminate_zeros()
+        E, _ = topology.unique_edges(Fc)
+        floor = 1e-3 * float(np.abs(W.data).mean()) if W.nnz else 1.0
+        U = sp.coo_matrix((np.full(len(E), floor), (E[:, 0], E[:, 1])), shape=(N, N))
+        W = (W + U + U.T).tocsr()
+        Lp = (sp.diags(np.asarray(W.sum(axis=1)).ravel()) - W).tocsr()
+    else:
+        Lp = clamped_laplacian(Lc, np.ones(N, bool)).tocsr()
+
+    def folded(x):
+        area = signed_uv_areas(x, Fc)
+        return area <= 1e-14 * np.abs(area).sum()
+
+    bad = folded(uv)
+    best = (int(bad.sum()), uv.copy())
     for r in range(rounds):
-        area = signed_uv_areas(uv, Fc)
-        bad = area <= 1e-14 * np.abs(area).sum()
         if not bad.any():
             return r
         if adj is None:
@@ -724,13 +757,16 @@ def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS):
         mark &= ~onb
         M = np.nonzero(mark)[0]
         if not len(M):
-            return r
-        Lp = clamped_laplacian(Lc, np.ones(N, bool)).tocsr()
+            break
         R = np.nonzero(~mark)[0]
         try:
             uv[M] = Factor(Lp[M][:, M].tocsc()).solve(-(Lp[M][:, R] @ uv[R]))
         except (ConformalError, RuntimeError, ValueError):
-            return r
+            break
+        bad = folded(uv)
+        if bad.sum() < best[0]:
+            best = (int(bad.sum()), uv.copy())
+    uv[:] = best[1]
     return rounds
 
 
@@ -840,7 +876,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
             info['exact'] = True
             info['flat_triangles'] = got[2]
             info['u_exact'] = got[0]
-            info['repair_rounds'] = _relax_folds(Fc, loop, uv, Lc)
+            info['repair_rounds'] = _relax_folds(Fc, loop, uv, Lc, Vc=Vc)
             return cut, loop, uv, seams, info
     P = paired_polygon(kt, lt, pair.ravel())
     uv = _harmonic(Lc, loop, P, cache)
