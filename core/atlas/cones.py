@@ -505,6 +505,8 @@ def raise_low_degree(T):
     low = np.nonzero((deg > 0) & (deg < 3) & ~onb)[0]
     flips = 0
     for v in low:
+        if np.count_nonzero(T.F == v) >= 3:      # an earlier flip gave it a third edge
+            continue
         for t in np.nonzero((T.F == v).any(1))[0]:
             k = int(np.nonzero(T.F[t] == v)[0][0])
             if _flip_edge(T, int(T.FE[t, k])):
