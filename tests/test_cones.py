@@ -355,3 +355,59 @@ def test_l2_angles_and_weighted_spread():
     w = np.array([0.005, 0.495, 0.495, 0.005])
     assert abs(weighted_spread(x, w) - 0.5) < 1e-12          # the 1% tails are the light ends
     assert abs(weighted_spread(x, np.ones(4)) - 1 / 8) < 1e-12
+
+
+def test_low_degree_vertices_get_a_third_edge():
+    """Intrinsic Delaunay flips can leave a vertex with two triangles (cow), where no flat metric
+    exists without degenerate triangles; ``raise_low_degree`` flips an opposite edge back. The flip
+    must keep the metric: angle sums (hence curvature) unchanged, triangle inequality everywhere,
+    Euler characteristic and orientation of the faces intact."""
+    from core.atlas.cones import raise_low_degree
+    from core.mesh.intrinsic import intrinsic_delaunay
+    V = np.array([[0.126, -0.132, 0.64], [0.105, -0.536, 0.362], [1.304, 0.947, -0.704],
+                  [-1.265, -0.623, 0.041]])
+    F = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]])
+    T = intrinsic_delaunay(V, F, mollify_delta=0.0)
+    assert np.bincount(T.F.ravel(), minlength=4).min() < 3        # the case being repaired
+    before = T.angle_sums()
+    flips = raise_low_degree(T)
+    assert flips >= 1
+    assert np.bincount(T.F.ravel(), minlength=4).min() >= 3
+    np.testing.assert_allclose(T.angle_sums(), before, atol=1e-9)
+    l = T.l
+    assert (l.sum(1, keepdims=True) - 2 * l > 0).all()
+    # the edge structure is consistent: each face's edge ids join that face's corners
+    ev = T.edge_vertices()
+    for t in range(len(T.F)):
+        for k in range(3):
+            assert set(ev[T.FE[t, k]]) == {T.F[t, (k + 1) % 3], T.F[t, (k + 2) % 3]}
+    assert raise_low_degree(T) == 0
+
+
+def test_cone_angles_respect_the_obtuse_corner_floor():
+    """A cone at the obtuse corner of a needle may not be so negative that the corner passes pi
+    (the input triangle would flip): every angle solver keeps ``kappa >= kappa_floor``."""
+    V, F, corners = rounded_cube(6, 0.3)
+    sy = ConeSystem(V, F)
+    assert np.all(sy.kappa_floor[np.isfinite(sy.kappa_floor)] <= 2 * np.pi)
+    # vertices whose floor binds: the largest floors of the mesh
+    order = np.argsort(-sy.kappa_floor)
+    S = np.unique(np.r_[order[:4], corners[:4]])
+    free = sy.l2_angles(S)
+    floor0 = sy.kappa_floor.copy()
+    # make the floor bind on two cones (the solvers must follow the per-vertex array)
+    sy.kappa_floor = sy.kappa_floor.copy()
+    sy.kappa_floor[S[:2]] = free[:2] + 0.5
+    k2 = sy.l2_angles(S)
+    assert np.all(k2 >= sy.kappa_floor[S] - 1e-6)
+    assert abs(k2.sum() - sy.total) < 1e-6
+    k3, _ = sy.linf_angles(S)
+    assert k3 is not None and np.all(k3 >= sy.kappa_floor[S] - 1e-6)
+    # the floor is the widened-corner bound: (2*pi - kappa) / (2*pi - Omega) * theta_max = pi - margin
+    from core.atlas.cones import CORNER_MARGIN
+    from core.mesh.geometry import corner_angles
+    th = np.zeros(len(V))
+    np.maximum.at(th, F.ravel(), corner_angles(V, F).ravel())
+    v = order[0]
+    assert abs((2 * np.pi - floor0[v]) / (2 * np.pi - sy.Omega[v]) * th[v]
+               - (np.pi - CORNER_MARGIN)) < 1e-9

@@ -41,6 +41,7 @@ from ..mesh import topology
 from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.intrinsic import corner_angles as corner_angles_l
 from ..mesh.intrinsic import corner_cotangents as corner_cotangents_l
+from ..mesh.intrinsic import face_areas as face_areas_l
 from ..mesh.intrinsic import intrinsic_delaunay, layout
 from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, singular_values
@@ -62,6 +63,7 @@ L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (pla
 REFACTOR = 0.5                     # Newton: factor the Hessian again when |r| fell by less than this
 CORRECTIONS = 2                    # fixed-point steps of the angles for the exact metric's log scale
 MAX_SPLITS = 10                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
+CORNER_MARGIN = 0.15              # a cone's corners are kept this far below pi (rad): kappa_floor
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 
 
@@ -124,6 +126,15 @@ class ConeSystem:
         self.u0 = self.solve(-self.Omega)
         # per-vertex area (a third of the incident triangles), for area-weighted statistics
         self.vertex_area = np.bincount(F.ravel(), np.repeat(self.A / 3, 3), minlength=n)
+        # a negative cone widens its corners by about (2*pi - kappa) / (angle sum): an obtuse corner
+        # (a needle's) at a cone must stay below pi - CORNER_MARGIN, or the input triangle comes out
+        # reflex and flips (cheburashka). Lower bound per vertex on kappa, (n,) radians.
+        from ..mesh.geometry import corner_angles
+        theta_max = np.zeros(n)
+        np.maximum.at(theta_max, F.ravel(), corner_angles(V, F).ravel())
+        with np.errstate(divide='ignore', invalid='ignore'):
+            floor = 2 * np.pi - (2 * np.pi - self.Omega) * (np.pi - CORNER_MARGIN) / theta_max
+        self.kappa_floor = np.where(np.isfinite(floor), floor, -np.inf)
 
     def solve(self, b):
         """Grounded solve: x (n,) or (n,r) with ``(L x)_free = b_free`` and x = 0 on the fixed set."""
@@ -177,8 +188,8 @@ class ConeSystem:
         k = len(S)
         if k == 0:
             return np.zeros(0)
-        lo = L2_BOUNDS[0] if lower is None else lower
-        hi = L2_BOUNDS[1] if upper is None else upper
+        lo = np.maximum(L2_BOUNDS[0] if lower is None else lower, self.kappa_floor[S])
+        hi = np.maximum(L2_BOUNDS[1] if upper is None else upper, lo)
         w = self.vertex_area / self.vertex_area.sum()
         A = np.c_[self.columns(S), -np.ones(self.n)]            # u - c = u0 + A [kappa; c]
         M = A.T @ (w[:, None] * A)
@@ -193,10 +204,12 @@ class ConeSystem:
             big = 1e3 * np.sqrt(ev.max())
             R = np.r_[R, big * np.r_[np.ones(k), 0.0][None]]
             b = np.r_[b, big * self.total]
-        bl = np.r_[np.full(k, lo), -np.inf]
-        bu = np.r_[np.full(k, hi), np.inf]
-        if self.needs_sum and k * hi < self.total:
-            bu[:k] = self.total / k + 1e-9
+        bl = np.r_[np.broadcast_to(lo, (k,)), -np.inf]
+        bu = np.r_[np.broadcast_to(hi, (k,)), np.inf]
+        if self.needs_sum and bu[:k].sum() < self.total:
+            bu[:k] = np.maximum(bu[:k], self.total / k + 1e-9)
+        if self.needs_sum and bl[:k].sum() > self.total:
+            bl[:k] = np.minimum(bl[:k], self.total / k - 1e-9)
         x = lsq_linear(R, b, bounds=(bl, bu), method='bvls').x
         kap = x[:k]
         if self.needs_sum:
@@ -224,6 +237,7 @@ class ConeSystem:
         if self.needs_sum and k * KAPPA_MAX < self.total - 1e-9:
             return None, np.inf
         lower = np.full(k, KAPPA_MIN) if lower is None else np.asarray(lower, np.float64)
+        lower = np.minimum(np.maximum(lower, self.kappa_floor[S]), KAPPA_MAX)
         if rows is None:
             rows = ~self.rings(S, 1)
         idx = np.nonzero(rows)[0]
@@ -442,6 +456,67 @@ def _boundary_data(Vc, Fc, loop, uc, vert_of=None, Lu=None, cache=None):
     return kt, lt, L
 
 
+def _flip_edge(T, e):
+    """Flip the interior edge ``e`` of the intrinsic triangulation ``T`` in place (faces ``t = (a, b, c)``
+    and ``s = (d, c, b)`` with ``e = b-c`` become ``(a, b, d)`` and ``(d, c, a)``), if the quad
+    ``a, b, d, c`` is convex in the intrinsic metric (angles at ``b`` and ``c`` below ``pi``). Returns
+    whether it flipped."""
+    F, FE, EF, EC, el = T.F, T.FE, T.EF, T.EC, T.edge_lengths
+    t, k, s, j = int(EF[e, 0]), int(EC[e, 0]), int(EF[e, 1]), int(EC[e, 1])
+    if s < 0 or t == s or F[t, k] == F[s, j]:
+        return False
+    nx, pv = (1, 2, 0), (2, 0, 1)
+    k1, k2, j1, j2 = nx[k], pv[k], nx[j], pv[j]
+    ang_t, ang_s = corner_angles_l(el[FE[t]][None])[0], corner_angles_l(el[FE[s]][None])[0]
+    # b = F[t, k1] = F[s, j2], c = F[t, k2] = F[s, j1]
+    if ang_t[k1] + ang_s[j2] >= np.pi - 1e-6 or ang_t[k2] + ang_s[j1] >= np.pi - 1e-6:
+        return False
+    l_e, l_ca, l_ab = el[e], el[FE[t, k1]], el[FE[t, k2]]
+    l_bd, l_dc = el[FE[s, j1]], el[FE[s, j2]]
+    At = face_areas_l(np.array([[l_e, l_ca, l_ab]]))[0]
+    As = face_areas_l(np.array([[l_e, l_bd, l_dc]]))[0]
+    xa, xd = (l_ab ** 2 - l_ca ** 2 + l_e ** 2) / (2 * l_e), (l_bd ** 2 - l_dc ** 2 + l_e ** 2) / (2 * l_e)
+    l_new = float(np.hypot(xa - xd, 2 * At / l_e + 2 * As / l_e))
+    a, d = F[t, k], F[s, j]
+    e_ca, e_bd = FE[t, k1], FE[s, j1]
+    side_bd = 0 if (EF[e_bd, 0] == s and EC[e_bd, 0] == j1) else 1
+    side_ca = 0 if (EF[e_ca, 0] == t and EC[e_ca, 0] == k1) else 1
+    F[t, k2], F[s, j2] = d, a
+    FE[t, k], FE[t, k1], FE[s, j], FE[s, j1] = e_bd, e, e_ca, e
+    EF[e_bd, side_bd], EC[e_bd, side_bd] = t, k
+    EF[e_ca, side_ca], EC[e_ca, side_ca] = s, j
+    EF[e, 0], EC[e, 0], EF[e, 1], EC[e, 1] = t, k1, s, j1
+    el[e] = l_new
+    return True
+
+
+def raise_low_degree(T):
+    """Give every interior vertex of degree below 3 of the intrinsic triangulation ``T`` (in place) a
+    third edge, by flipping an edge opposite it. Intrinsic Delaunay flips can leave a vertex of
+    positive curvature with two triangles only (cow: a vertex of degree 3 and angle sum 3.9 rad); a
+    flat metric then needs both triangles' angles there to be ``pi`` (degenerate), so Newton on the
+    exact metric cannot converge and a harmonic layout puts the vertex on a segment (a squashed input
+    triangle). Returns the number of flips (0 on most meshes: the vertices are found by one
+    ``bincount``)."""
+    deg = np.bincount(T.F.ravel(), minlength=T.n)
+    onb = np.zeros(T.n, bool)
+    bnd = T.EF[:, 1] < 0
+    onb[T.edge_vertices()[bnd].ravel()] = True
+    low = np.nonzero((deg > 0) & (deg < 3) & ~onb)[0]
+    flips = 0
+    for v in low:
+        if np.count_nonzero(T.F == v) >= 3:      # an earlier flip gave it a third edge
+            continue
+        for t in np.nonzero((T.F == v).any(1))[0]:
+            k = int(np.nonzero(T.F[t] == v)[0][0])
+            if _flip_edge(T, int(T.FE[t, k])):
+                flips += 1
+                break
+    if flips:
+        T.report['flips'] = T.report.get('flips', 0) + flips
+    return flips
+
+
 def _disk_laplacian(Vc, Fc, cache=None):
     """The cut disk's Laplacian (N,N), for its boundary data and for the UVs' harmonic extension:
     the intrinsic Delaunay cotan Laplacian of the cut disk (its boundary, i.e. the cut, is never
@@ -451,6 +526,7 @@ def _disk_laplacian(Vc, Fc, cache=None):
     if cache is not None and cache.get('disk_key') == key:
         return cache['disk']
     T = intrinsic_delaunay(Vc, Fc, mollify_delta=0.0)
+    T.report['degree_flips'] = raise_low_degree(T)
     L = T.cotan_laplacian().tocsr() if T.report['flips'] else cotan_laplacian(Vc, Fc)
     if cache is not None:
         cache['disk_key'], cache['disk'], cache['disk_T'] = key, L, T
@@ -638,20 +714,40 @@ def _harmonic(L, loop, PB, cache=None):
     return X
 
 
-def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS):
+def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS, Vc=None):
     """Local repair of an exact layout ``uv`` (N,2), in place: the input triangles are laid out with
     straight edges between the vertices of the intrinsic triangulation, so a needle triangle can come
     out flipped or flat. The vertices within ``1 + round`` rings of such triangles (not on the cut
-    disk's boundary ``loop``, so seam copies stay congruent) are re-placed by the harmonic map with
-    nonnegative weights (``clamped_laplacian`` of ``Lc``, a convex combination of the neighbours).
+    disk's boundary ``loop``, so seam copies stay congruent) are re-placed by a map with nonnegative
+    weights (a convex combination of the neighbours). With ``Vc`` (N,3) the weights live on the input
+    triangles ``Fc`` themselves (their cotan weights clamped at 0, plus a small uniform weight that
+    keeps every vertex attached), whose orientation is what gets measured; without it, on the
+    intrinsic ``Lc`` (``clamped_laplacian``). The layout with the fewest folded triangles is kept.
     Returns the number of rounds used."""
+    import scipy.sparse as sp
     N = len(uv)
     onb = np.zeros(N, bool)
     onb[loop] = True
     adj = None
+    if Vc is not None:
+        W = -clamped_laplacian(cotan_laplacian(Vc, Fc), np.ones(N, bool))
+        W.setdiag(0)
+        W.eliminate_zeros()
+        E, _ = topology.unique_edges(Fc)
+        floor = 1e-3 * float(np.abs(W.data).mean()) if W.nnz else 1.0
+        U = sp.coo_matrix((np.full(len(E), floor), (E[:, 0], E[:, 1])), shape=(N, N))
+        W = (W + U + U.T).tocsr()
+        Lp = (sp.diags(np.asarray(W.sum(axis=1)).ravel()) - W).tocsr()
+    else:
+        Lp = clamped_laplacian(Lc, np.ones(N, bool)).tocsr()
+
+    def folded(x):
+        area = signed_uv_areas(x, Fc)
+        return area <= 1e-14 * np.abs(area).sum()
+
+    bad = folded(uv)
+    best = (int(bad.sum()), uv.copy())
     for r in range(rounds):
-        area = signed_uv_areas(uv, Fc)
-        bad = area <= 1e-14 * np.abs(area).sum()
         if not bad.any():
             return r
         if adj is None:
@@ -663,13 +759,16 @@ def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS):
         mark &= ~onb
         M = np.nonzero(mark)[0]
         if not len(M):
-            return r
-        Lp = clamped_laplacian(Lc, np.ones(N, bool)).tocsr()
+            break
         R = np.nonzero(~mark)[0]
         try:
             uv[M] = Factor(Lp[M][:, M].tocsc()).solve(-(Lp[M][:, R] @ uv[R]))
         except (ConformalError, RuntimeError, ValueError):
-            return r
+            break
+        bad = folded(uv)
+        if bad.sum() < best[0]:
+            best = (int(bad.sum()), uv.copy())
+    uv[:] = best[1]
     return rounds
 
 
@@ -779,7 +878,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
             info['exact'] = True
             info['flat_triangles'] = got[2]
             info['u_exact'] = got[0]
-            info['repair_rounds'] = _relax_folds(Fc, loop, uv, Lc)
+            info['repair_rounds'] = _relax_folds(Fc, loop, uv, Lc, Vc=Vc)
             return cut, loop, uv, seams, info
     P = paired_polygon(kt, lt, pair.ravel())
     uv = _harmonic(Lc, loop, P, cache)
