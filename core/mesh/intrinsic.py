@@ -137,32 +137,38 @@ def layout(l, A=None):
 # --- the half-edge-free, edge-id based connectivity --------------------------------------------------
 
 def _build_edges(F, n):
-    """Edge ids from faces: returns FE (m,3), EF (E,2), EC (E,2). Raises on non-manifold/misoriented."""
+    """Edge ids from faces: returns FE (m,3), EF (E,2), EC (E,2). Raises on non-manifold/misoriented.
+
+    One stable sort of the 3m undirected half-edge keys gives the edge ids (in increasing key order),
+    the counts and both sides of every edge."""
     m = len(F)
     u = F[:, _NEXT].ravel()                                  # halfedge 3t+k goes u -> v, opposite corner k
     v = F[:, _PREV].ravel()
-    lo, hi = np.minimum(u, v), np.maximum(u, v)
-    key = lo * np.int64(n) + hi
-    uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+    key = np.minimum(u, v) * np.int64(n) + np.maximum(u, v)
+    order = np.argsort(key, kind='stable')
+    skey = key[order]
+    first = np.ones(3 * m, dtype=bool)
+    first[1:] = skey[1:] != skey[:-1]
+    sid = np.cumsum(first) - 1                               # edge id of each sorted half-edge
+    E = int(sid[-1]) + 1 if len(sid) else 0
+    cnt = np.diff(np.flatnonzero(np.r_[first, True]))
     if np.any(cnt > 2):
         raise ConformalError(f'{int(np.sum(cnt > 2))} non-manifold edges have more than two faces',
                              'bad_topology')
     if np.any(u == v):
         raise ConformalError('a face uses the same vertex twice', 'degenerate')
-    E = len(uniq)
-    FE = inv.reshape(m, 3).astype(np.int64)
-    order = np.argsort(inv, kind='stable')
-    first = np.ones(3 * m, dtype=bool)
-    first[1:] = inv[order][1:] != inv[order][:-1]
+    inv = np.empty(3 * m, dtype=np.int64)
+    inv[order] = sid
+    FE = inv.reshape(m, 3)
     EF = np.full((E, 2), -1, dtype=np.int64)
     EC = np.full((E, 2), -1, dtype=np.int64)
     h0 = order[first]
     h1 = order[~first]
-    EF[inv[h0], 0], EC[inv[h0], 0] = h0 // 3, h0 % 3
-    EF[inv[h1], 1], EC[inv[h1], 1] = h1 // 3, h1 % 3
+    EF[sid[first], 0], EC[sid[first], 0] = h0 // 3, h0 % 3
+    e1 = sid[~first]
+    EF[e1, 1], EC[e1, 1] = h1 // 3, h1 % 3
     # consistent orientation: the two halfedges of an interior edge run in opposite directions
-    e1 = inv[h1]
-    g0 = h0[np.searchsorted(inv[h0], e1)] if len(h1) else h0[:0]
+    g0 = h0[e1]
     if np.any(u[h1] != v[g0]):
         raise ConformalError('faces are not consistently oriented', 'bad_topology')
     return FE, EF, EC
@@ -184,6 +190,10 @@ class IntrinsicTriangulation:
     Fields: ``n`` vertex count; ``F`` (m,3) int64 intrinsic faces (CCW); ``FE`` (m,3) edge id opposite
     each corner; ``EF``/``EC`` (E,2) face and opposite corner on each side of an edge (-1: boundary side);
     ``edge_lengths`` (E,) float64 (units of V); ``report`` dict (see ``intrinsic_delaunay``).
+
+    The per-face lengths, areas, cotangents and gradient basis are computed once, on first use, and
+    kept (read-only): do not modify ``F``, ``FE`` or ``edge_lengths`` in place afterwards (build a new
+    triangulation instead).
     """
     n: int
     F: np.ndarray
@@ -192,33 +202,44 @@ class IntrinsicTriangulation:
     EC: np.ndarray
     edge_lengths: np.ndarray
     report: dict = field(default_factory=dict)
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def _get(self, name):
+        """The cached per-face array ``name`` ('l', 'A', 'cot', 'grad'), computed on first use."""
+        c = self._cache
+        if name not in c:
+            if name == 'l':
+                c['l'] = self.edge_lengths[self.FE]
+            elif name == 'A':
+                c['A'] = face_areas(self._get('l'))
+            elif name == 'cot':
+                c['cot'] = corner_cotangents(self._get('l'), self._get('A'))
+            else:
+                c['grad'] = self._compute_grad_basis()
+            c[name].setflags(write=False)
+        return c[name]
 
     # -- per-face geometry --
     @property
     def l(self):
-        """(m,3) per-face lengths, ``l[t,k]`` opposite corner k."""
-        return self.edge_lengths[self.FE]
+        """(m,3) per-face lengths, ``l[t,k]`` opposite corner k (read-only)."""
+        return self._get('l')
 
     def areas(self):
-        """(m,) intrinsic triangle areas ``A`` (units of V squared)."""
-        return face_areas(self.l)
+        """(m,) intrinsic triangle areas ``A`` (units of V squared; read-only)."""
+        return self._get('A')
 
     def angles(self):
         """(m,3) corner angles ``theta`` in radians."""
         return corner_angles(self.l)
 
     def cotangents(self):
-        """(m,3) cotangent of each corner angle."""
-        return corner_cotangents(self.l)
+        """(m,3) cotangent of each corner angle (read-only)."""
+        return self._get('cot')
 
     def edge_weights(self):
         """(E,) cotan weights ``w_e = (cot alpha + cot beta) / 2`` (one term on a boundary edge)."""
-        c = self.cotangents()
-        w = np.zeros(len(self.edge_lengths))
-        for side in (0, 1):
-            ok = self.EF[:, side] >= 0
-            w[ok] += 0.5 * c[self.EF[ok, side], self.EC[ok, side]]
-        return w
+        return _edge_weights(self.cotangents(), self.EF, self.EC)
 
     def edge_vertices(self):
         """(E,2) the two end vertices of each edge (several edges may join the same pair)."""
@@ -254,12 +275,15 @@ class IntrinsicTriangulation:
 
     def _grad_basis(self):
         """(m,3,2) gradient of each corner's hat function in its triangle's frame; and A (m,)."""
-        P = self.layout()
-        A = face_areas(self.l)
+        return self._get('grad'), self.areas()
+
+    def _compute_grad_basis(self):
+        P = layout(self.l, self.areas())
+        A = self.areas()
         e = P[:, _PREV] - P[:, _NEXT]                         # edge opposite corner k, CCW direction
         Je = np.stack([-e[..., 1], e[..., 0]], axis=-1)       # rotated 90 deg CCW: points to corner k
         with np.errstate(divide='ignore', invalid='ignore'):
-            return Je / (2.0 * A[:, None, None]), A
+            return Je / (2.0 * A[:, None, None])
 
     def gradient(self, f):
         """(m,2) gradient of the piecewise-linear per-vertex function ``f`` (n,) in each face's frame."""
@@ -285,11 +309,24 @@ class IntrinsicTriangulation:
 
     def non_delaunay(self, tol=1e-12):
         """(E,) bool: interior edges with ``cot alpha + cot beta < -tol`` (opposite angles sum > pi)."""
-        c = self.cotangents()
-        inner = self.EF[:, 1] >= 0
-        s = np.zeros(len(self.edge_lengths))
-        s[inner] = (c[self.EF[inner, 0], self.EC[inner, 0]] + c[self.EF[inner, 1], self.EC[inner, 1]])
-        return inner & (s < -tol)
+        return _non_delaunay(self.cotangents(), self.EF, self.EC, tol)
+
+
+def _edge_weights(c, EF, EC):
+    """(E,) half cotan weight sums of per-face cotangents ``c`` (m,3) over the sides ``EF``/``EC``."""
+    w = np.zeros(len(EF))
+    for side in (0, 1):
+        ok = EF[:, side] >= 0
+        w[ok] += 0.5 * c[EF[ok, side], EC[ok, side]]
+    return w
+
+
+def _non_delaunay(c, EF, EC, tol):
+    """(E,) bool: interior edges whose cotangents ``c`` (m,3) sum below ``-tol``."""
+    inner = EF[:, 1] >= 0
+    s = np.zeros(len(EF))
+    s[inner] = (c[EF[inner, 0], EC[inner, 0]] + c[EF[inner, 1], EC[inner, 1]])
+    return inner & (s < -tol)
 
 
 def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, lengths=None):
@@ -327,7 +364,12 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
         el = el + eps
 
     T = IntrinsicTriangulation(n, F, FE, EF, EC, el)
-    neg_before = int(np.sum(T.edge_weights() < -tol))
+    # the geometry of the input triangulation, once: the counts before, the first round's test, and
+    # (when nothing flips) the counts after and the cached operators
+    l0 = el[FE]
+    A0 = face_areas(l0)
+    c0 = corner_cotangents(l0, A0)
+    neg_before = int(np.sum(_edge_weights(c0, EF, EC) < -tol))
 
     interior = EF[:, 1] >= 0
     dirty = np.flatnonzero(interior)
@@ -341,7 +383,10 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
         l_e = el[e]
         l_ca, l_ab = el[FE[t, k1]], el[FE[t, k2]]             # face t = (a, b, c), a opposite e
         l_bd, l_dc = el[FE[s, j1]], el[FE[s, j2]]             # face s = (d, c, b), d opposite e
-        w = _cot_pair(l_e, l_ca, l_ab, l_bd, l_dc)
+        if rounds == 0:
+            w = c0[t, k] + c0[s, j]                           # the same numbers _cot_pair gives
+        else:
+            w = _cot_pair(l_e, l_ca, l_ab, l_bd, l_dc)
         a, d = F[t, k], F[s, j]
         bad = (w < -tol) & (t != s) & (a != d)
         e, t, k, s, j = e[bad], t[bad], k[bad], s[bad], j[bad]
@@ -396,6 +441,10 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
         touched = np.unique(touched)
         dirty = touched[interior[touched]]
 
+    if flips == 0:
+        T._cache.update(l=l0, A=A0, cot=c0)
+        for a in (l0, A0, c0):
+            a.setflags(write=False)
     w_after = T.edge_weights()
     T.report = dict(
         flips=int(flips), rounds=int(rounds), eps=float(eps),
