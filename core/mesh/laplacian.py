@@ -6,15 +6,17 @@ It equals the P1 finite-element stiffness matrix, ``L_ij = sum_T A_T grad(phi_i)
 import numpy as np
 import scipy.sparse as sp
 
+from .geometry import cross
+
 
 def corner_cotangents(V, F):
     """(m,3) cotangent of each corner angle; cot[t,k] belongs to the edge opposite corner k."""
     P = V[F]
     a = P[:, [1, 2, 0]] - P
     b = P[:, [2, 0, 1]] - P
-    cross = np.linalg.norm(np.cross(a, b), axis=2)
+    cr = np.linalg.norm(cross(a, b), axis=2)
     dot = np.einsum('mkd,mkd->mk', a, b)
-    return dot / np.maximum(cross, np.finfo(float).tiny)
+    return dot / np.maximum(cr, np.finfo(float).tiny)
 
 
 def cotan_laplacian(V, F, n=None):
@@ -33,11 +35,11 @@ def face_gradients(V, F):
     """Gradients of the hat functions, (m,3,3): G[t,k] = grad phi_{F[t,k]} on triangle t (a 3-vector
     in the triangle's plane, units 1/length), and the unit normals N (m,3) and areas A (m,)."""
     P = V[F]
-    n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    n = cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
     dbl = np.linalg.norm(n, axis=1)
     N = n / np.maximum(dbl, np.finfo(float).tiny)[:, None]
     E = P[:, [2, 0, 1]] - P[:, [1, 2, 0]]          # edge opposite corner k, counter-clockwise
-    G = np.cross(N[:, None, :], E) / np.maximum(dbl, np.finfo(float).tiny)[:, None, None]
+    G = cross(N[:, None, :], E) / np.maximum(dbl, np.finfo(float).tiny)[:, None, None]
     return G, N, 0.5 * dbl
 
 
