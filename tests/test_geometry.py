@@ -99,3 +99,13 @@ def test_cross_is_numpys_cross_bit_for_bit():
     assert np.array_equal(cross(a, b), np.cross(a, b))
     assert np.array_equal(cross(a[:, None, :], E), np.cross(a[:, None, :], E))
     assert np.allclose(np.einsum('md,md->m', cross(a, b), a), 0.0, atol=1e-9)
+
+
+def test_norm3_is_numpys_norm_bit_for_bit():
+    """core.mesh.geometry.norm3 gives exactly np.linalg.norm's lengths along the last axis."""
+    from core.mesh.geometry import norm3
+    rng = np.random.default_rng(8)
+    x = rng.standard_normal((400, 3, 3)) * rng.uniform(1e-3, 1e3, (400, 3, 1))
+    assert np.array_equal(norm3(x), np.linalg.norm(x, axis=2))
+    assert np.array_equal(norm3(x[:, 0]), np.linalg.norm(x[:, 0], axis=1))
+    assert norm3(np.array([3.0, 4.0, 12.0])) == 13.0

@@ -55,7 +55,9 @@ def edge_lengths_3d(V, F):
     """(m,3) lengths of the 3D triangles; ``l[t,k] = |V[F[t,k+1]] - V[F[t,k+2]]|`` (units of V)."""
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
-    return np.linalg.norm(V[F[:, _NEXT]] - V[F[:, _PREV]], axis=2)
+    d = V[F[:, _NEXT]] - V[F[:, _PREV]]
+    # np.linalg.norm(d, axis=2), the same sum in the same order, without its temporaries
+    return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
 
 
 def mollify(l, delta=1e-4):

@@ -6,7 +6,7 @@ It equals the P1 finite-element stiffness matrix, ``L_ij = sum_T A_T grad(phi_i)
 import numpy as np
 import scipy.sparse as sp
 
-from .geometry import cross
+from .geometry import cross, norm3
 
 
 def corner_cotangents(V, F):
@@ -14,7 +14,7 @@ def corner_cotangents(V, F):
     P = V[F]
     a = P[:, [1, 2, 0]] - P
     b = P[:, [2, 0, 1]] - P
-    cr = np.linalg.norm(cross(a, b), axis=2)
+    cr = norm3(cross(a, b))
     dot = np.einsum('mkd,mkd->mk', a, b)
     return dot / np.maximum(cr, np.finfo(float).tiny)
 
@@ -36,7 +36,7 @@ def face_gradients(V, F):
     in the triangle's plane, units 1/length), and the unit normals N (m,3) and areas A (m,)."""
     P = V[F]
     n = cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
-    dbl = np.linalg.norm(n, axis=1)
+    dbl = norm3(n)
     N = n / np.maximum(dbl, np.finfo(float).tiny)[:, None]
     E = P[:, [2, 0, 1]] - P[:, [1, 2, 0]]          # edge opposite corner k, counter-clockwise
     G = cross(N[:, None, :], E) / np.maximum(dbl, np.finfo(float).tiny)[:, None, None]

@@ -4,7 +4,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConformalError
-from .geometry import face_areas
+from .geometry import face_areas, norm3
 from . import topology
 
 DEFAULT_MAX_FACES = 5_000_000
@@ -72,7 +72,7 @@ def degenerate_faces(V, F, rel=1e-12):
     rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
     Vn = normalise_scale(np.asarray(V, np.float64))[0]   # the test must not under- or overflow
     A = face_areas(Vn, F)
-    el = np.linalg.norm(Vn[F[:, 1]] - Vn[F[:, 0]], axis=1)
+    el = norm3(Vn[F[:, 1]] - Vn[F[:, 0]])
     scale2 = max(float(np.mean(el)) ** 2, np.finfo(float).tiny)
     return rep | (A <= rel * scale2)
 
