@@ -254,14 +254,22 @@ class IntrinsicTriangulation:
         Symmetric positive semidefinite, ``L @ 1 = 0``; off-diagonal entries ``-W_ij <= 0`` once the
         triangulation is Delaunay. Multiple edges between a vertex pair add up.
         """
-        c = 0.5 * self.cotangents()
-        i = self.F[:, _NEXT].ravel()
-        j = self.F[:, _PREV].ravel()
-        w = c.ravel()
         n = self.n
+        m = len(self.F)
+        # the 12m entries (-w at (i,j) and (j,i), w at (i,i) and (j,j)) in this order, with the index
+        # type scipy would convert them to (int32 when it fits), written once into their arrays
+        idx = np.int32 if max(n, 12 * m) < 2 ** 31 - 1 else np.int64
+        h = 3 * m
+        w = (0.5 * self.cotangents()).ravel()
+        vals = np.empty(4 * h)
+        np.negative(w, out=vals[:h])
+        vals[h:2 * h] = vals[:h]
+        vals[2 * h:3 * h] = w
+        vals[3 * h:] = w
+        i = self.F[:, _NEXT].astype(idx).ravel()
+        j = self.F[:, _PREV].astype(idx).ravel()
         rows = np.concatenate([i, j, i, j])
         cols = np.concatenate([j, i, i, j])
-        vals = np.concatenate([-w, -w, w, w])
         return sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
 
     def angle_sums(self):

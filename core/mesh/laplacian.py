@@ -23,8 +23,9 @@ def cotan_laplacian(V, F, n=None):
     """Cotan Laplacian ``L`` (n,n) as scipy.sparse CSC, float64."""
     n = len(V) if n is None else n
     cot = 0.5 * corner_cotangents(V, F)
-    i = F[:, [1, 2, 0]].ravel()
-    j = F[:, [2, 0, 1]].ravel()
+    idx = np.int32 if max(n, 6 * len(F)) < 2 ** 31 - 1 else np.int64   # scipy's own index type
+    i = F[:, [1, 2, 0]].astype(idx).ravel()
+    j = F[:, [2, 0, 1]].astype(idx).ravel()
     w = cot.ravel()
     W = sp.coo_matrix((np.r_[w, w], (np.r_[i, j], np.r_[j, i])), shape=(n, n)).tocsc()
     d = np.asarray(W.sum(axis=1)).ravel()
