@@ -55,7 +55,10 @@ def edge_lengths_3d(V, F):
     """(m,3) lengths of the 3D triangles; ``l[t,k] = |V[F[t,k+1]] - V[F[t,k+2]]|`` (units of V)."""
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
-    d = V[F[:, _NEXT]] - V[F[:, _PREV]]
+    P = V[F]                                                 # (m,3,3), one gather
+    d = np.empty_like(P)
+    for k in range(3):
+        np.subtract(P[:, (k + 1) % 3], P[:, (k + 2) % 3], out=d[:, k])
     # np.linalg.norm(d, axis=2), the same sum in the same order, without its temporaries
     return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
 
@@ -113,8 +116,15 @@ def corner_cotangents(l, A=None):
     if A is None:
         A = face_areas(l)
     l2 = l * l
+    den = 4.0 * A
+    out = np.empty_like(l2)
     with np.errstate(divide='ignore', invalid='ignore'):
-        return (l2[:, _NEXT] + l2[:, _PREV] - l2) / (4.0 * A[:, None])
+        for k in range(3):                                   # column by column: no (m,3) gathers
+            o = out[:, k]
+            np.add(l2[:, (k + 1) % 3], l2[:, (k + 2) % 3], out=o)
+            o -= l2[:, k]
+            o /= den
+    return out
 
 
 def layout(l, A=None):
