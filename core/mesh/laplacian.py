@@ -39,8 +39,11 @@ def face_gradients(V, F):
     n = cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
     dbl = norm3(n)
     N = n / np.maximum(dbl, np.finfo(float).tiny)[:, None]
-    E = P[:, [2, 0, 1]] - P[:, [1, 2, 0]]          # edge opposite corner k, counter-clockwise
-    G = cross(N[:, None, :], E) / np.maximum(dbl, np.finfo(float).tiny)[:, None, None]
+    E = np.empty_like(P)                           # edge opposite corner k, counter-clockwise
+    for k in range(3):
+        np.subtract(P[:, (k + 2) % 3], P[:, (k + 1) % 3], out=E[:, k])
+    G = cross(N[:, None, :], E)
+    G /= np.maximum(dbl, np.finfo(float).tiny)[:, None, None]
     return G, N, 0.5 * dbl
 
 
