@@ -203,9 +203,10 @@ class IntrinsicTriangulation:
     each corner; ``EF``/``EC`` (E,2) face and opposite corner on each side of an edge (-1: boundary side);
     ``edge_lengths`` (E,) float64 (units of V); ``report`` dict (see ``intrinsic_delaunay``).
 
-    The per-face lengths, areas, cotangents and gradient basis are computed once, on first use, and
-    kept (read-only): do not modify ``F``, ``FE`` or ``edge_lengths`` in place afterwards (build a new
-    triangulation instead).
+    The areas and the gradient basis (used again by every ``gradient`` / ``divergence``) are computed
+    once, on first use, and kept (read-only): do not modify ``F``, ``FE`` or ``edge_lengths`` in place
+    afterwards (build a new triangulation instead). Lengths and cotangents are not kept (memory: 48 MB
+    at 1M triangles, alive during the factorisations).
     """
     n: int
     F: np.ndarray
@@ -217,15 +218,11 @@ class IntrinsicTriangulation:
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def _get(self, name):
-        """The cached per-face array ``name`` ('l', 'A', 'cot', 'grad'), computed on first use."""
+        """The cached per-face array ``name`` ('A' or 'grad'), computed on first use."""
         c = self._cache
         if name not in c:
-            if name == 'l':
-                c['l'] = self.edge_lengths[self.FE]
-            elif name == 'A':
-                c['A'] = face_areas(self._get('l'))
-            elif name == 'cot':
-                c['cot'] = corner_cotangents(self._get('l'), self._get('A'))
+            if name == 'A':
+                c['A'] = face_areas(self.l)
             else:
                 c['grad'] = self._compute_grad_basis()
             c[name].setflags(write=False)
@@ -234,8 +231,8 @@ class IntrinsicTriangulation:
     # -- per-face geometry --
     @property
     def l(self):
-        """(m,3) per-face lengths, ``l[t,k]`` opposite corner k (read-only)."""
-        return self._get('l')
+        """(m,3) per-face lengths, ``l[t,k]`` opposite corner k."""
+        return self.edge_lengths[self.FE]
 
     def areas(self):
         """(m,) intrinsic triangle areas ``A`` (units of V squared; read-only)."""
@@ -246,8 +243,8 @@ class IntrinsicTriangulation:
         return corner_angles(self.l)
 
     def cotangents(self):
-        """(m,3) cotangent of each corner angle (read-only)."""
-        return self._get('cot')
+        """(m,3) cotangent of each corner angle."""
+        return corner_cotangents(self.l, self.areas())
 
     def edge_weights(self):
         """(E,) cotan weights ``w_e = (cot alpha + cot beta) / 2`` (one term on a boundary edge)."""
@@ -461,17 +458,19 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
         touched = np.unique(touched)
         dirty = touched[interior[touched]]
 
-    if flips == 0:
-        T._cache.update(l=l0, A=A0, cot=c0)
-        for a in (l0, A0, c0):
-            a.setflags(write=False)
-    w_after = T.edge_weights()
+    if flips:                                                 # the flipped triangulation's geometry, once
+        l0 = el[FE]
+        A0 = face_areas(l0)
+        c0 = corner_cotangents(l0, A0)
+    A0.setflags(write=False)
+    T._cache['A'] = A0
+    w_after = _edge_weights(c0, EF, EC)
     T.report = dict(
         flips=int(flips), rounds=int(rounds), eps=float(eps),
         negative_before=neg_before,
         negative_after=int(np.sum(w_after < -tol)),
         negative_boundary_after=int(np.sum((w_after < -tol) & ~interior)),
-        non_delaunay_after=int(np.sum(T.non_delaunay(tol))),
+        non_delaunay_after=int(np.sum(_non_delaunay(c0, EF, EC, tol))),
     )
     T.report['converged'] = T.report['non_delaunay_after'] == 0
     return T
