@@ -87,3 +87,25 @@ def test_signed_uv_areas_and_vertex_mu():
     assert np.isnan(mu[4])
     mu = vertex_mu(F, np.array([np.nan, 4.0]), np.array([1.0, 3.0]), 4)
     assert np.isnan(mu[0]) and mu[1] == pytest.approx(4.0)
+
+
+def test_cross_is_numpys_cross_bit_for_bit():
+    """core.mesh.geometry.cross (used by the per-triangle geometry) gives exactly np.cross's numbers,
+    with broadcasting (one normal against three edge vectors per triangle)."""
+    from core.mesh.geometry import cross
+    rng = np.random.default_rng(7)
+    a, b = rng.standard_normal((500, 3)), rng.standard_normal((500, 3)) * 1e3
+    E = rng.standard_normal((500, 3, 3))
+    assert np.array_equal(cross(a, b), np.cross(a, b))
+    assert np.array_equal(cross(a[:, None, :], E), np.cross(a[:, None, :], E))
+    assert np.allclose(np.einsum('md,md->m', cross(a, b), a), 0.0, atol=1e-9)
+
+
+def test_norm3_is_numpys_norm_bit_for_bit():
+    """core.mesh.geometry.norm3 gives exactly np.linalg.norm's lengths along the last axis."""
+    from core.mesh.geometry import norm3
+    rng = np.random.default_rng(8)
+    x = rng.standard_normal((400, 3, 3)) * rng.uniform(1e-3, 1e3, (400, 3, 1))
+    assert np.array_equal(norm3(x), np.linalg.norm(x, axis=2))
+    assert np.array_equal(norm3(x[:, 0]), np.linalg.norm(x[:, 0], axis=1))
+    assert norm3(np.array([3.0, 4.0, 12.0])) == 13.0

@@ -345,3 +345,27 @@ def test_errors_carry_code_and_remedy():
     assert err.value.code in ('bad_topology', 'no_boundary')
     with pytest.raises(KeyError):
         ConformalError("x", code='no_such_code')
+
+
+def test_edge_table_matches_the_separate_checks():
+    """topology.edge_table (one sort shared by check_mesh) gives the same edges, counts and twins as
+    unique_edges and twin_halfedges, whatever the face order; it counts misoriented edges, and
+    vertex_fans still finds a pinched vertex."""
+    from core.mesh import topology
+    from core.surfaces import make_surface
+    V, F = make_surface('bump', 9)
+    F = F[np.random.default_rng(3).permutation(len(F))]
+    n = len(V)
+    E, counts, twin, same_way = topology.edge_table(F, n)
+    E0, c0 = topology.unique_edges(F)
+    np.testing.assert_array_equal(E, E0)
+    np.testing.assert_array_equal(counts, c0)
+    np.testing.assert_array_equal(twin, topology.twin_halfedges(F, n))
+    assert same_way == 0 and (twin >= 0).sum() == 2 * (counts == 2).sum()
+    Fb = F.copy()
+    Fb[0] = Fb[0, ::-1]                           # one face turned over: its three edges run the same way
+    inner = topology.edge_mask(E[counts == 2], Fb[0][[0, 1, 1, 2, 2, 0]].reshape(3, 2)).sum()
+    assert inner > 0 and topology.edge_table(Fb, n)[3] == inner
+    # two triangles touching at vertex 0 only: two fans there
+    Fp = np.array([[0, 1, 2], [0, 3, 4]])
+    np.testing.assert_array_equal(topology.vertex_fans(Fp, 5), [2, 1, 1, 1, 1])

@@ -6,15 +6,38 @@ Lengths are in the mesh's units, angles in radians.
 import numpy as np
 
 
+def cross(a, b):
+    """Cross product of 3-vectors along the last axis of ``a`` and ``b`` (broadcast, (...,3) each):
+    the same numbers as ``np.cross`` (same operations in the same order), without its axis moves and
+    temporaries."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), np.result_type(a, b))
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    np.multiply(a1, b2, out=out[..., 0])
+    out[..., 0] -= a2 * b1
+    np.multiply(a2, b0, out=out[..., 1])
+    out[..., 1] -= a0 * b2
+    np.multiply(a0, b1, out=out[..., 2])
+    out[..., 2] -= a1 * b0
+    return out
+
+
+def norm3(x):
+    """Euclidean length along the last axis (of length 3) of ``x`` (...,3): the same numbers as
+    ``np.linalg.norm(x, axis=-1)`` (squares summed in the same order), about five times faster."""
+    x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
+    return np.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+
+
 def face_normals_unnormalised(V, F):
     """(m,3) cross products (V1-V0) x (V2-V0); their length is twice the triangle area."""
     P = V[F]
-    return np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    return cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
 
 
 def face_areas(V, F):
     """Triangle areas ``A`` (m,), in squared mesh units."""
-    return 0.5 * np.linalg.norm(face_normals_unnormalised(V, F), axis=1)
+    return 0.5 * norm3(face_normals_unnormalised(V, F))
 
 
 def edge_vectors(V, F):
@@ -28,9 +51,9 @@ def corner_angles(V, F):
     P = V[F]
     a = P[:, [1, 2, 0]] - P            # corner k -> corner k+1
     b = P[:, [2, 0, 1]] - P            # corner k -> corner k+2
-    cross = np.linalg.norm(np.cross(a, b), axis=2)
+    cross_ = norm3(cross(a, b))
     dot = np.einsum('mkd,mkd->mk', a, b)
-    return np.arctan2(cross, dot)
+    return np.arctan2(cross_, dot)
 
 
 def angle_sums(V, F, n=None):

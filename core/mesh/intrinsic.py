@@ -55,7 +55,12 @@ def edge_lengths_3d(V, F):
     """(m,3) lengths of the 3D triangles; ``l[t,k] = |V[F[t,k+1]] - V[F[t,k+2]]|`` (units of V)."""
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
-    return np.linalg.norm(V[F[:, _NEXT]] - V[F[:, _PREV]], axis=2)
+    P = V[F]                                                 # (m,3,3), one gather
+    d = np.empty_like(P)
+    for k in range(3):
+        np.subtract(P[:, (k + 1) % 3], P[:, (k + 2) % 3], out=d[:, k])
+    # np.linalg.norm(d, axis=2), the same sum in the same order, without its temporaries
+    return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
 
 
 def mollify(l, delta=1e-4):
@@ -111,8 +116,15 @@ def corner_cotangents(l, A=None):
     if A is None:
         A = face_areas(l)
     l2 = l * l
+    den = 4.0 * A
+    out = np.empty_like(l2)
     with np.errstate(divide='ignore', invalid='ignore'):
-        return (l2[:, _NEXT] + l2[:, _PREV] - l2) / (4.0 * A[:, None])
+        for k in range(3):                                   # column by column: no (m,3) gathers
+            o = out[:, k]
+            np.add(l2[:, (k + 1) % 3], l2[:, (k + 2) % 3], out=o)
+            o -= l2[:, k]
+            o /= den
+    return out
 
 
 def layout(l, A=None):
@@ -137,32 +149,38 @@ def layout(l, A=None):
 # --- the half-edge-free, edge-id based connectivity --------------------------------------------------
 
 def _build_edges(F, n):
-    """Edge ids from faces: returns FE (m,3), EF (E,2), EC (E,2). Raises on non-manifold/misoriented."""
+    """Edge ids from faces: returns FE (m,3), EF (E,2), EC (E,2). Raises on non-manifold/misoriented.
+
+    One stable sort of the 3m undirected half-edge keys gives the edge ids (in increasing key order),
+    the counts and both sides of every edge."""
     m = len(F)
     u = F[:, _NEXT].ravel()                                  # halfedge 3t+k goes u -> v, opposite corner k
     v = F[:, _PREV].ravel()
-    lo, hi = np.minimum(u, v), np.maximum(u, v)
-    key = lo * np.int64(n) + hi
-    uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+    key = np.minimum(u, v) * np.int64(n) + np.maximum(u, v)
+    order = np.argsort(key, kind='stable')
+    skey = key[order]
+    first = np.ones(3 * m, dtype=bool)
+    first[1:] = skey[1:] != skey[:-1]
+    sid = np.cumsum(first) - 1                               # edge id of each sorted half-edge
+    E = int(sid[-1]) + 1 if len(sid) else 0
+    cnt = np.diff(np.flatnonzero(np.r_[first, True]))
     if np.any(cnt > 2):
         raise ConformalError(f'{int(np.sum(cnt > 2))} non-manifold edges have more than two faces',
                              'bad_topology')
     if np.any(u == v):
         raise ConformalError('a face uses the same vertex twice', 'degenerate')
-    E = len(uniq)
-    FE = inv.reshape(m, 3).astype(np.int64)
-    order = np.argsort(inv, kind='stable')
-    first = np.ones(3 * m, dtype=bool)
-    first[1:] = inv[order][1:] != inv[order][:-1]
+    inv = np.empty(3 * m, dtype=np.int64)
+    inv[order] = sid
+    FE = inv.reshape(m, 3)
     EF = np.full((E, 2), -1, dtype=np.int64)
     EC = np.full((E, 2), -1, dtype=np.int64)
     h0 = order[first]
     h1 = order[~first]
-    EF[inv[h0], 0], EC[inv[h0], 0] = h0 // 3, h0 % 3
-    EF[inv[h1], 1], EC[inv[h1], 1] = h1 // 3, h1 % 3
+    EF[sid[first], 0], EC[sid[first], 0] = h0 // 3, h0 % 3
+    e1 = sid[~first]
+    EF[e1, 1], EC[e1, 1] = h1 // 3, h1 % 3
     # consistent orientation: the two halfedges of an interior edge run in opposite directions
-    e1 = inv[h1]
-    g0 = h0[np.searchsorted(inv[h0], e1)] if len(h1) else h0[:0]
+    g0 = h0[e1]
     if np.any(u[h1] != v[g0]):
         raise ConformalError('faces are not consistently oriented', 'bad_topology')
     return FE, EF, EC
@@ -184,6 +202,11 @@ class IntrinsicTriangulation:
     Fields: ``n`` vertex count; ``F`` (m,3) int64 intrinsic faces (CCW); ``FE`` (m,3) edge id opposite
     each corner; ``EF``/``EC`` (E,2) face and opposite corner on each side of an edge (-1: boundary side);
     ``edge_lengths`` (E,) float64 (units of V); ``report`` dict (see ``intrinsic_delaunay``).
+
+    The areas and the gradient basis (used again by every ``gradient`` / ``divergence``) are computed
+    once, on first use, and kept (read-only): do not modify ``F``, ``FE`` or ``edge_lengths`` in place
+    afterwards (build a new triangulation instead). Lengths and cotangents are not kept (memory: 48 MB
+    at 1M triangles, alive during the factorisations).
     """
     n: int
     F: np.ndarray
@@ -192,6 +215,18 @@ class IntrinsicTriangulation:
     EC: np.ndarray
     edge_lengths: np.ndarray
     report: dict = field(default_factory=dict)
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def _get(self, name):
+        """The cached per-face array ``name`` ('A' or 'grad'), computed on first use."""
+        c = self._cache
+        if name not in c:
+            if name == 'A':
+                c['A'] = face_areas(self.l)
+            else:
+                c['grad'] = self._compute_grad_basis()
+            c[name].setflags(write=False)
+        return c[name]
 
     # -- per-face geometry --
     @property
@@ -200,8 +235,8 @@ class IntrinsicTriangulation:
         return self.edge_lengths[self.FE]
 
     def areas(self):
-        """(m,) intrinsic triangle areas ``A`` (units of V squared)."""
-        return face_areas(self.l)
+        """(m,) intrinsic triangle areas ``A`` (units of V squared; read-only)."""
+        return self._get('A')
 
     def angles(self):
         """(m,3) corner angles ``theta`` in radians."""
@@ -209,16 +244,11 @@ class IntrinsicTriangulation:
 
     def cotangents(self):
         """(m,3) cotangent of each corner angle."""
-        return corner_cotangents(self.l)
+        return corner_cotangents(self.l, self.areas())
 
     def edge_weights(self):
         """(E,) cotan weights ``w_e = (cot alpha + cot beta) / 2`` (one term on a boundary edge)."""
-        c = self.cotangents()
-        w = np.zeros(len(self.edge_lengths))
-        for side in (0, 1):
-            ok = self.EF[:, side] >= 0
-            w[ok] += 0.5 * c[self.EF[ok, side], self.EC[ok, side]]
-        return w
+        return _edge_weights(self.cotangents(), self.EF, self.EC)
 
     def edge_vertices(self):
         """(E,2) the two end vertices of each edge (several edges may join the same pair)."""
@@ -231,14 +261,22 @@ class IntrinsicTriangulation:
         Symmetric positive semidefinite, ``L @ 1 = 0``; off-diagonal entries ``-W_ij <= 0`` once the
         triangulation is Delaunay. Multiple edges between a vertex pair add up.
         """
-        c = 0.5 * self.cotangents()
-        i = self.F[:, _NEXT].ravel()
-        j = self.F[:, _PREV].ravel()
-        w = c.ravel()
         n = self.n
+        m = len(self.F)
+        # the 12m entries (-w at (i,j) and (j,i), w at (i,i) and (j,j)) in this order, with the index
+        # type scipy would convert them to (int32 when it fits), written once into their arrays
+        idx = np.int32 if max(n, 12 * m) < 2 ** 31 - 1 else np.int64
+        h = 3 * m
+        w = (0.5 * self.cotangents()).ravel()
+        vals = np.empty(4 * h)
+        np.negative(w, out=vals[:h])
+        vals[h:2 * h] = vals[:h]
+        vals[2 * h:3 * h] = w
+        vals[3 * h:] = w
+        i = self.F[:, _NEXT].astype(idx).ravel()
+        j = self.F[:, _PREV].astype(idx).ravel()
         rows = np.concatenate([i, j, i, j])
         cols = np.concatenate([j, i, i, j])
-        vals = np.concatenate([-w, -w, w, w])
         return sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
 
     def angle_sums(self):
@@ -254,12 +292,15 @@ class IntrinsicTriangulation:
 
     def _grad_basis(self):
         """(m,3,2) gradient of each corner's hat function in its triangle's frame; and A (m,)."""
-        P = self.layout()
-        A = face_areas(self.l)
+        return self._get('grad'), self.areas()
+
+    def _compute_grad_basis(self):
+        P = layout(self.l, self.areas())
+        A = self.areas()
         e = P[:, _PREV] - P[:, _NEXT]                         # edge opposite corner k, CCW direction
         Je = np.stack([-e[..., 1], e[..., 0]], axis=-1)       # rotated 90 deg CCW: points to corner k
         with np.errstate(divide='ignore', invalid='ignore'):
-            return Je / (2.0 * A[:, None, None]), A
+            return Je / (2.0 * A[:, None, None])
 
     def gradient(self, f):
         """(m,2) gradient of the piecewise-linear per-vertex function ``f`` (n,) in each face's frame."""
@@ -285,11 +326,24 @@ class IntrinsicTriangulation:
 
     def non_delaunay(self, tol=1e-12):
         """(E,) bool: interior edges with ``cot alpha + cot beta < -tol`` (opposite angles sum > pi)."""
-        c = self.cotangents()
-        inner = self.EF[:, 1] >= 0
-        s = np.zeros(len(self.edge_lengths))
-        s[inner] = (c[self.EF[inner, 0], self.EC[inner, 0]] + c[self.EF[inner, 1], self.EC[inner, 1]])
-        return inner & (s < -tol)
+        return _non_delaunay(self.cotangents(), self.EF, self.EC, tol)
+
+
+def _edge_weights(c, EF, EC):
+    """(E,) half cotan weight sums of per-face cotangents ``c`` (m,3) over the sides ``EF``/``EC``."""
+    w = np.zeros(len(EF))
+    for side in (0, 1):
+        ok = EF[:, side] >= 0
+        w[ok] += 0.5 * c[EF[ok, side], EC[ok, side]]
+    return w
+
+
+def _non_delaunay(c, EF, EC, tol):
+    """(E,) bool: interior edges whose cotangents ``c`` (m,3) sum below ``-tol``."""
+    inner = EF[:, 1] >= 0
+    s = np.zeros(len(EF))
+    s[inner] = (c[EF[inner, 0], EC[inner, 0]] + c[EF[inner, 1], EC[inner, 1]])
+    return inner & (s < -tol)
 
 
 def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, lengths=None):
@@ -327,7 +381,12 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
         el = el + eps
 
     T = IntrinsicTriangulation(n, F, FE, EF, EC, el)
-    neg_before = int(np.sum(T.edge_weights() < -tol))
+    # the geometry of the input triangulation, once: the counts before, the first round's test, and
+    # (when nothing flips) the counts after and the cached operators
+    l0 = el[FE]
+    A0 = face_areas(l0)
+    c0 = corner_cotangents(l0, A0)
+    neg_before = int(np.sum(_edge_weights(c0, EF, EC) < -tol))
 
     interior = EF[:, 1] >= 0
     dirty = np.flatnonzero(interior)
@@ -341,7 +400,10 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
         l_e = el[e]
         l_ca, l_ab = el[FE[t, k1]], el[FE[t, k2]]             # face t = (a, b, c), a opposite e
         l_bd, l_dc = el[FE[s, j1]], el[FE[s, j2]]             # face s = (d, c, b), d opposite e
-        w = _cot_pair(l_e, l_ca, l_ab, l_bd, l_dc)
+        if rounds == 0:
+            w = c0[t, k] + c0[s, j]                           # the same numbers _cot_pair gives
+        else:
+            w = _cot_pair(l_e, l_ca, l_ab, l_bd, l_dc)
         a, d = F[t, k], F[s, j]
         bad = (w < -tol) & (t != s) & (a != d)
         e, t, k, s, j = e[bad], t[bad], k[bad], s[bad], j[bad]
@@ -396,13 +458,19 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
         touched = np.unique(touched)
         dirty = touched[interior[touched]]
 
-    w_after = T.edge_weights()
+    if flips:                                                 # the flipped triangulation's geometry, once
+        l0 = el[FE]
+        A0 = face_areas(l0)
+        c0 = corner_cotangents(l0, A0)
+    A0.setflags(write=False)
+    T._cache['A'] = A0
+    w_after = _edge_weights(c0, EF, EC)
     T.report = dict(
         flips=int(flips), rounds=int(rounds), eps=float(eps),
         negative_before=neg_before,
         negative_after=int(np.sum(w_after < -tol)),
         negative_boundary_after=int(np.sum((w_after < -tol) & ~interior)),
-        non_delaunay_after=int(np.sum(T.non_delaunay(tol))),
+        non_delaunay_after=int(np.sum(_non_delaunay(c0, EF, EC, tol))),
     )
     T.report['converged'] = T.report['non_delaunay_after'] == 0
     return T

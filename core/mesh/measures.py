@@ -1,14 +1,16 @@
 """The measures of docs/math.md §3, for a UV map or a map to the sphere."""
 import numpy as np
 
+from .geometry import cross, norm3
+
 
 def _local_frames(P):
     """P (m,3,3) triangles -> Q (m,3,2) the same triangles in their own plane, and areas (m,)."""
     e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
-    nrm = np.cross(e1, e2)
-    dbl = np.linalg.norm(nrm, axis=1)
-    x = e1 / np.maximum(np.linalg.norm(e1, axis=1), np.finfo(float).tiny)[:, None]
-    y = np.cross(nrm / np.maximum(dbl, np.finfo(float).tiny)[:, None], x)
+    nrm = cross(e1, e2)
+    dbl = norm3(nrm)
+    x = e1 / np.maximum(norm3(e1), np.finfo(float).tiny)[:, None]
+    y = cross(nrm / np.maximum(dbl, np.finfo(float).tiny)[:, None], x)
     Q = np.zeros((len(P), 3, 2))
     Q[:, 1] = np.c_[(e1 * x).sum(1), (e1 * y).sum(1)]
     Q[:, 2] = np.c_[(e2 * x).sum(1), (e2 * y).sum(1)]

@@ -45,6 +45,34 @@ def unique_edges(F):
     return np.stack([key // n, key % n], axis=1), counts
 
 
+def edge_table(F, n):
+    """One sort of the 3m undirected half-edge keys of ``F`` (m,3), shared by the topology checks.
+
+    Returns ``(E, counts, twin, same_way)``: the undirected edges ``E`` (e,2) with E[:,0] < E[:,1] in
+    increasing order and how many triangles hold each (e,) (as ``unique_edges``); ``twin`` (3m,), the
+    opposite half-edge of each half-edge or -1 (as ``twin_halfedges``; meaningful only when no edge has
+    more than two triangles and ``same_way`` is 0); ``same_way`` how many edges have two half-edges
+    running the same way (inconsistent orientation). Half-edge 3t+k runs from F[t,k] to F[t,k+1]."""
+    F = np.asarray(F, np.int64)
+    u = F.ravel()
+    v = F[:, [1, 2, 0]].ravel()
+    key = np.minimum(u, v) * np.int64(n) + np.maximum(u, v)
+    order = np.argsort(key)
+    skey = key[order]
+    first = np.ones(len(key), bool)
+    first[1:] = skey[1:] != skey[:-1]
+    starts = np.flatnonzero(first)
+    counts = np.diff(np.r_[starts, len(key)])
+    ukey = skey[starts]
+    E = np.stack([ukey // n, ukey % n], axis=1)
+    twin = np.full(len(key), -1, np.int64)
+    pair = starts[counts == 2]
+    h0, h1 = order[pair], order[pair + 1]
+    same = u[h0] == u[h1]
+    twin[h0[~same]], twin[h1[~same]] = h1[~same], h0[~same]
+    return E, counts, twin, int(same.sum())
+
+
 def boundary_loops(F, n, twin=None):
     """Boundary loops as a list of (k,) int arrays of vertex indices, longest first (ties: lowest
     vertex first). Each loop runs with the surface on its left (the faces' counter-clockwise direction)
@@ -115,9 +143,12 @@ def vertex_fans(F, n, twin=None):
     ok = tw >= 0
     other = (tw[ok] // 3) * 3 + (tw[ok] % 3 + 1) % 3
     A = sp.coo_matrix((np.ones(ok.sum()), (c[ok], other)), shape=(3 * m, 3 * m))
-    _, lab = connected_components(A, directed=False)
-    pairs = np.unique(F.ravel().astype(np.int64) * (3 * m) + lab)
-    return np.bincount(pairs // (3 * m), minlength=n)
+    ncomp, lab = connected_components(A, directed=False)
+    # a fan's corners all sit at one vertex (links join corners of the same vertex): count the fans
+    # of each vertex through the vertex of each component
+    comp_vertex = np.empty(ncomp, np.int64)
+    comp_vertex[lab] = F.ravel()
+    return np.bincount(comp_vertex, minlength=n)
 
 
 def edge_mask(E, pairs):

@@ -4,7 +4,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConformalError
-from .geometry import face_areas
+from .geometry import face_areas, norm3
 from . import topology
 
 DEFAULT_MAX_FACES = 5_000_000
@@ -72,7 +72,7 @@ def degenerate_faces(V, F, rel=1e-12):
     rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
     Vn = normalise_scale(np.asarray(V, np.float64))[0]   # the test must not under- or overflow
     A = face_areas(Vn, F)
-    el = np.linalg.norm(Vn[F[:, 1]] - Vn[F[:, 0]], axis=1)
+    el = norm3(Vn[F[:, 1]] - Vn[F[:, 0]])
     scale2 = max(float(np.mean(el)) ** 2, np.finfo(float).tiny)
     return rep | (A <= rel * scale2)
 
@@ -127,17 +127,16 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
     if len(bad):
         raise ConformalError(f"mesh has {_plural(len(bad), 'duplicate face')} (faces {_examples(bad)}): "
                              "delete the duplicate faces (merge by distance)", 'bad_topology')
-    E, ecount = topology.unique_edges(F)
+    E, ecount, twin, same_way = topology.edge_table(F, n)     # one sort for the edge checks below
     if (ecount > 2).any():
         bad = E[ecount > 2]
         ex = ', '.join(f"({a}, {b})" for a, b in bad[:3].tolist())
         raise ConformalError(f"mesh has {_plural(len(bad), 'non-manifold edge')} shared by 3 or more "
                              f"faces, e.g. {ex}: select them (Select All by Trait > Non Manifold) and "
                              "separate or delete faces", 'bad_topology')
-    H = topology.halfedges(F)
-    hk = H[:, 0] * n + H[:, 1]
-    uh, hc = np.unique(hk, return_counts=True)
-    if (hc > 1).any():
+    if same_way:
+        H = topology.halfedges(F)
+        uh, hc = np.unique(H[:, 0] * n + H[:, 1], return_counts=True)
         k = uh[hc > 1][:3]
         ex = ', '.join(f"({a}, {b})" for a, b in zip((k // n).tolist(), (k % n).tolist()))
         raise ConformalError(f"faces are not consistently oriented ({_plural(int((hc > 1).sum()), 'edge')} "
@@ -149,7 +148,6 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
         bad = np.nonzero(~used)[0]
         raise ConformalError(f"mesh has {_plural(len(bad), 'loose vertex')} in no face "
                              f"(vertices {_examples(bad)}): delete loose geometry", 'bad_topology')
-    twin = topology.twin_halfedges(F, n)
     fans = topology.vertex_fans(F, n, twin)
     if (fans > 1).any():
         bad = np.nonzero(fans > 1)[0]
