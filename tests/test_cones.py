@@ -375,6 +375,9 @@ def test_low_degree_vertices_get_a_third_edge():
     assert np.bincount(T.F.ravel(), minlength=4).min() >= 3
     np.testing.assert_allclose(T.angle_sums(), before, atol=1e-9)
     l = T.l
+    # the triangulation's cached per-face areas follow the flips
+    from core.mesh.intrinsic import face_areas as face_areas_l
+    np.testing.assert_allclose(T.areas(), face_areas_l(l), rtol=1e-12)
     assert (l.sum(1, keepdims=True) - 2 * l > 0).all()
     # the edge structure is consistent: each face's edge ids join that face's corners
     ev = T.edge_vertices()

@@ -487,6 +487,7 @@ def _flip_edge(T, e):
     EF[e_ca, side_ca], EC[e_ca, side_ca] = s, j
     EF[e, 0], EC[e, 0], EF[e, 1], EC[e, 1] = t, k1, s, j1
     el[e] = l_new
+    T._cache.clear()                  # the cached per-face areas and gradients are for the old faces
     return True
 
 
