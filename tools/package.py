@@ -149,8 +149,8 @@ def fetch_wheels(wheel_dir, python='3.11', platforms=None, log=print):
             _download(wheel_dir, f'scipy=={scipy_v}', python, PLATFORMS[plat])
         if not scipy_here():
             raise PackageError(f"no scipy {scipy_v} wheel for {plat}, Python {python}")
-        out[plat] = [scipy_here()[0]] + _cholespy(wheel_dir, python, plat, log) + \
-            _highspy(wheel_dir, python, plat, log)
+        out[plat] = [scipy_here()[0]] + [w for name in OPTIONAL_WHEELS
+                                         for w in _optional_wheel(name, wheel_dir, python, plat, log)]
     # scikit-fmm: Windows wheel from PyPI (cp311 only), Linux wheel built from the sdist, none for macOS.
     if 'windows-x64' in out:
         win = have(wheel_dir, f'scikit_fmm-{fmm_v}-{cp}-*win_amd64.whl')
@@ -173,56 +173,41 @@ def fetch_wheels(wheel_dir, python='3.11', platforms=None, log=print):
     return out
 
 
-CHOLESPY_TAGS = {   # cholespy's wheels need newer platform tags than scipy's
-    'linux-x64': ['manylinux_2_28_x86_64', 'manylinux_2_27_x86_64'],
-    'windows-x64': ['win_amd64'],
-    'macos-arm64': ['macosx_11_0_arm64', 'macosx_12_0_arm64'],
-    'macos-x64': ['macosx_10_14_x86_64'],
+# Optional compiled helpers of the core, shipped where PyPI has their wheels; without them the core
+# falls back (fallback named in the log). Their wheels need newer platform tags than scipy's.
+OPTIONAL_WHEELS = {
+    'cholespy': dict(         # CHOLMOD, core.mesh.solve; one cp312-abi3 wheel serves Python 3.13
+        abi={'3.11': 'cp311-cp311', '3.13': 'cp312-abi3'},
+        fallback='SuperLU will be used',
+        tags={'linux-x64': ['manylinux_2_28_x86_64', 'manylinux_2_27_x86_64'],
+              'windows-x64': ['win_amd64'],
+              'macos-arm64': ['macosx_11_0_arm64', 'macosx_12_0_arm64'],
+              'macos-x64': ['macosx_10_14_x86_64']}),
+    'highspy': dict(          # HiGHS's own binding: uniform's warm-started programs, core.disk.uniform
+        abi={'3.11': 'cp311-cp311', '3.13': 'cp313-cp313'},
+        fallback="scipy's linprog will be used (the same solver, from scratch each round)",
+        tags={'linux-x64': ['manylinux_2_28_x86_64', 'manylinux_2_24_x86_64'],
+              'windows-x64': ['win_amd64'],
+              'macos-arm64': ['macosx_11_0_arm64'],
+              'macos-x64': ['macosx_10_9_x86_64', 'macosx_10_13_x86_64']}),
 }
 
 
-def _cholespy(wheel_dir, python, plat, log):
-    """The cholespy wheel (CHOLMOD, core.mesh.solve) for ``plat`` and ``python``: cp311, or the
-    cp312-abi3 wheel for 3.13. Returns [path], or [] with a note when PyPI has none (the core then
-    uses SuperLU for every size)."""
-    v = pinned('cholespy')
-    tag = 'cp311-cp311' if python == '3.11' else 'cp312-abi3'
+def _optional_wheel(name, wheel_dir, python, plat, log):
+    """The wheel of the optional package ``name`` (``OPTIONAL_WHEELS``) for ``plat`` and ``python``.
+    Returns [path], or [] with a note when PyPI has none."""
+    spec = OPTIONAL_WHEELS[name]
+    v = pinned(name)
 
     def here():
-        return [w for w in have(wheel_dir, f'cholespy-{v}-{tag}-*.whl') if _wheel_platform_matches(w, plat)]
-    if not here():
-        log(f"downloading cholespy {v} for {plat}, Python {python}")
-        try:
-            _download(wheel_dir, f'cholespy=={v}', python, CHOLESPY_TAGS[plat])
-        except PackageError as exc:
-            log(f"  no cholespy wheel for {plat}, Python {python}: SuperLU will be used ({exc})")
-    return here()[:1]
-
-
-HIGHSPY_TAGS = {    # highspy's wheels: manylinux_2_28 (also tagged 2_24), and per-Python macOS minimums
-    'linux-x64': ['manylinux_2_28_x86_64', 'manylinux_2_24_x86_64'],
-    'windows-x64': ['win_amd64'],
-    'macos-arm64': ['macosx_11_0_arm64'],
-    'macos-x64': ['macosx_10_9_x86_64', 'macosx_10_13_x86_64'],
-}
-
-
-def _highspy(wheel_dir, python, plat, log):
-    """The highspy wheel (HiGHS's own binding: ``uniform``'s warm-started linear programs,
-    core.disk.uniform) for ``plat`` and ``python``. Returns [path], or [] with a note when PyPI has none
-    (the core then solves the same programs with scipy's HiGHS, from scratch each round)."""
-    v = pinned('highspy')
-    cp = 'cp' + python.replace('.', '')
-
-    def here():
-        return [w for w in have(wheel_dir, f'highspy-{v}-{cp}-{cp}-*.whl')
+        return [w for w in have(wheel_dir, f"{name}-{v}-{spec['abi'][python]}-*.whl")
                 if _wheel_platform_matches(w, plat)]
     if not here():
-        log(f"downloading highspy {v} for {plat}, Python {python}")
+        log(f"downloading {name} {v} for {plat}, Python {python}")
         try:
-            _download(wheel_dir, f'highspy=={v}', python, HIGHSPY_TAGS[plat])
+            _download(wheel_dir, f'{name}=={v}', python, spec['tags'][plat])
         except PackageError as exc:
-            log(f"  no highspy wheel for {plat}, Python {python}: scipy's linprog will be used ({exc})")
+            log(f"  no {name} wheel for {plat}, Python {python}: {spec['fallback']} ({exc})")
     return here()[:1]
 
 
