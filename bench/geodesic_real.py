@@ -242,6 +242,27 @@ def heat_multi(Vs, Fs):
     return name, time.perf_counter() - t, fn
 
 
+def anchor_runs(V, F, sets, post=lambda d: d):
+    """The two on-mesh anchors on every source set: [(name, {set: distances}, setup s, mean query s)]
+    for potpourri3d's heat method and, where potpourri3d has it, its mesh fast marching. ``post`` maps
+    each distance array (e.g. to the vertices compared)."""
+    out = []
+    hname, th_setup, heat = heat_multi(V, F)
+    t = time.perf_counter()
+    fmm = fmm_setup(V, F)
+    tf_setup = time.perf_counter() - t
+    for name, setup, fn in ((hname, th_setup, heat), ('mesh FMM (potpourri3d)', tf_setup, fmm)):
+        if fn is None:
+            continue
+        d, tq = {}, []
+        for k in SETS:
+            t = time.perf_counter()
+            d[k] = post(fn(sets[k]))
+            tq.append(time.perf_counter() - t)
+        out.append((name, d, setup, float(np.mean(tq))))
+    return out
+
+
 def bounds_violations(d, Vs, src, upper, keep):
     """Vertices (count) below the 3D distance to the nearest source, and above the edge-graph
     distance ``upper`` by more than 0.1 %, among ``keep``."""
@@ -348,23 +369,8 @@ def run_mesh(name, grids, rows, calib, plot, sphere=False):
         ts = time.perf_counter() - t
         d, tq, rep = ours(gg)
         evaluate(f'ours {g}', 'ours', g, d, ts, tq, rep)
-    hname, th_setup, heat = heat_multi(Vs, Fs)
-    hd, th = {}, []
-    for k in SETS:
-        t = time.perf_counter()
-        hd[k] = reduce(heat(sets[k]))
-        th.append(time.perf_counter() - t)
-    evaluate(hname, hname, '-', hd, th_setup, float(np.mean(th)))
-    t = time.perf_counter()
-    fmm = fmm_setup(Vs, Fs)
-    tf_setup = time.perf_counter() - t
-    if fmm is not None:
-        fd, tf = {}, []
-        for k in SETS:
-            t = time.perf_counter()
-            fd[k] = reduce(fmm(sets[k]))
-            tf.append(time.perf_counter() - t)
-        evaluate('mesh FMM (potpourri3d)', 'mesh FMM (potpourri3d)', '-', fd, tf_setup, float(np.mean(tf)))
+    for aname, d, setup, tq in anchor_runs(Vs, Fs, sets, reduce):
+        evaluate(aname, aname, '-', d, setup, tq)
     rows.append({'mesh': name, 'verts': len(V), 'tris': len(F), 'method': 'exact MMP', 'grid': '-',
                  'per_set': {k: (0.0, 0.0) for k in SETS}, 'mean': 0.0, 'worst_mean': 0.0, 'max': 0.0,
                  'setup': 0.0, 'query': t_exact, 'below_euclid': 0, 'above_edges': 0})
@@ -430,23 +436,8 @@ def run_sphere(name, V, F, rows, plot):
         out[k] = d
     evaluate('ours sphere mode', out, t_setup, float(np.mean(tq)),
              {'grid': rep.get('grid', '-') if isinstance(rep.get('grid'), int) else '-'})
-    hname, th_setup, heat = heat_multi(V, F)
-    hd, th = {}, []
-    for k in SETS:
-        t = time.perf_counter()
-        hd[k] = heat(sets[k])
-        th.append(time.perf_counter() - t)
-    evaluate(hname, hd, th_setup, float(np.mean(th)))
-    t = time.perf_counter()
-    fmm = fmm_setup(V, F)
-    tf_setup = time.perf_counter() - t
-    if fmm is not None:
-        fd, tf = {}, []
-        for k in SETS:
-            t = time.perf_counter()
-            fd[k] = fmm(sets[k])
-            tf.append(time.perf_counter() - t)
-        evaluate('mesh FMM (potpourri3d)', fd, tf_setup, float(np.mean(tf)))
+    for aname, d, setup, tq in anchor_runs(V, F, sets):
+        evaluate(aname, d, setup, tq)
     print(f"# {name} (sphere mode): done; exact MMP {t_exact:.2f} s per set", flush=True)
     if plot:
         plot_mesh(name + '_sphere', results)
