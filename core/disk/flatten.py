@@ -20,10 +20,11 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..errors import ConformalError
 from ..mesh.geometry import angle_sums, face_areas
-from ..mesh.laplacian import cotan_laplacian, face_gradients, gradient, divergence
+from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians, signed_uv_areas
 from ..mesh.intrinsic import intrinsic_delaunay
 from ..mesh.solve import Factor, backend, factor_all, fill_order, sub_order
@@ -88,8 +89,8 @@ class DiskSystem:
         mask = np.zeros(n, bool)
         mask[self.B] = True
         self.I = np.nonzero(~mask)[0]
-        self.G, self.N, self.A = face_gradients(V, F)
-        self._T = None
+        self.A = face_areas(V, F)
+        T = None
         self.operators = {'mode': operators, 'intrinsic': False}
         if operators != 'extrinsic':
             # mollify only when asked ('intrinsic', which flatten() uses on zero-area triangles): on
@@ -98,20 +99,24 @@ class DiskSystem:
             rep = T.report
             use = operators == 'intrinsic' or rep['negative_before'] > rep['negative_boundary_after']
             if use:
-                self._T = T
                 self.operators.update(intrinsic=True, **{k: T.report[k] for k in (
                     'flips', 'eps', 'negative_before', 'negative_after', 'converged')})
             else:
                 self.operators['negative_weights'] = T.report['negative_before']
-        if self._T is not None:
-            self.L = self._T.cotan_laplacian().tocsr()
-            s = self._T.angle_sums()
+                T = None
+        if T is not None:
+            L = T.cotan_laplacian()            # CSC of a symmetric matrix: its arrays are L's CSR arrays
+            self.L = sp.csr_matrix((L.data, L.indices, L.indptr), shape=L.shape)
+            del L
+            s = T.angle_sums()
         else:
             self.L = cotan_laplacian(V, F)
             s = angle_sums(V, F)
+        del T                                  # only L and the angle sums are needed from here on
         LI = self.L[self.I]
         self.L_II = LI[:, self.I].tocsc()
         self.L_IB = LI[:, self.B].tocsc()
+        del LI                                 # a Laplacian-sized copy: not alive while factoring
         keep = np.arange(n) != self.B[0]
         self._keep = keep
         self._II_many = None
@@ -186,14 +191,17 @@ class DiskSystem:
     # --- step 5: conformal extension ---------------------------------------------------------
     def conjugate(self, x):
         """Conjugate harmonic ``y`` (n,) of ``x`` (n,): least-squares ``grad y = n x grad x``, i.e.
-        ``L y = div(n x grad x)``, with y fixed at one boundary vertex."""
+        ``L y = div(n x grad x)``, with y fixed at one boundary vertex.
+
+        On a triangle, ``A_T grad phi_i . (n x grad phi_j) = +-1/2`` for ``i != j`` (the sign of the
+        pair's orientation) whatever its shape, so the right-hand side cancels at every interior vertex
+        and is ``b[B_j] = (x[B_(j-1)] - x[B_(j+1)]) / 2`` on the boundary loop (docs/math.md §2): the
+        same for the mesh's triangles and the intrinsic ones, and no per-triangle geometry is kept
+        for it."""
         if self._neumann is None:
             self._neumann = Factor(self.L[self._keep][:, self._keep])
-        if self._T is not None:
-            b = self._T.divergence(self._T.rotated(self._T.gradient(x)))
-        else:
-            X = np.cross(self.N, gradient(self.G, self.F, x))
-            b = divergence(self.G, self.F, self.A, X, self.n)
+        b = np.zeros(self.n)
+        b[self.B] = 0.5 * (x[np.roll(self.B, 1)] - x[np.roll(self.B, -1)])
         y = np.zeros(self.n)
         y[self._keep] = self._neumann.solve(b[self._keep])
         return y
@@ -225,9 +233,10 @@ class DiskSystem:
         return self.extend(self.boundary_curve(u))
 
 
-def normalise_uv(V, F, uv, fit='true_scale'):
+def normalise_uv(V, F, uv, fit='true_scale', area=None):
     """Centre, rotate to principal axes and scale a UV map (n,2). ``true_scale``: total UV area equals
-    total 3D area. ``unit_square``: fit into [0,1]^2 keeping the aspect ratio."""
+    total 3D area (``area``, the sum of the triangles' areas, if the caller has it). ``unit_square``:
+    fit into [0,1]^2 keeping the aspect ratio."""
     if fit not in FIT_MODES:
         raise ConformalError(f"unknown fit {fit!r}: use one of {', '.join(FIT_MODES)}")
     W = uv[F]
@@ -247,7 +256,7 @@ def normalise_uv(V, F, uv, fit='true_scale'):
         R[:, 1] *= -1
     uv = uv @ R
     if fit == 'true_scale':
-        return uv * np.sqrt(face_areas(V, F).sum() / a.sum())
+        return uv * np.sqrt((face_areas(V, F).sum() if area is None else area) / a.sum())
     lo, hi = uv.min(0), uv.max(0)
     size = (hi - lo).max()
     return (uv - lo) / size + (1 - (hi - lo) / size) / 2
@@ -380,7 +389,7 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
         job.result()                           # not wanted after all (the optimiser fell back)
     report_progress(0.95, 'measuring')
     Fm = F if mask is None else F[mask]
-    uv = normalise_uv(V, Fm, uv, fit)
+    uv = normalise_uv(V, Fm, uv, fit, area=(system.A if mask is None else system.A[mask]).sum())
     J, A = system.jacobians(uv), system.A
     measured, mu_real = measures_from_jacobians(*((J, A) if mask is None else (J[mask], A[mask])))
     report.update(measured)

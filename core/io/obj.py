@@ -277,32 +277,49 @@ def _format_rows(A, fmt, head):
     return (line * len(A)) % tuple(A.ravel().tolist())
 
 
-def _int_lines(values, seps, line_first, head=b'f '):
-    """ASCII text of non-negative integers ``values`` (t,), each followed by its separator byte
+def _int_lines(values, seps, line_first, head=b'f ', chunk=1 << 20):
+    """ASCII bytes of non-negative integers ``values`` (t,), each followed by its separator byte
     ``seps`` (t,) uint8 (b'/', b' ' or b'\\n'), with ``head`` before the values that start a line
-    (``line_first`` (t,) bool). Vectorised: every digit is written by numpy, none by Python."""
+    (``line_first`` (t,) bool). Vectorised: the digits of 0..max(values) are written once into a
+    table (one row per number, left-aligned), and each value's row is gathered, followed by its
+    separator, with the padding dropped by one boolean mask (``chunk`` values at a time, so the
+    temporary rows stay near 10 bytes per value)."""
     values = np.asarray(values, np.int64)
-    if len(values) and values.min() < 0:
+    if not len(values):
+        return b''
+    if values.min() < 0:
         raise ValueError("negative index")
+    k = np.arange(int(values.max()) + 1, dtype=np.int64)
     powers = 10 ** np.arange(19, dtype=np.int64)
-    nd = np.maximum(np.searchsorted(powers, values, side='right'), 1)       # digits of each value
-    width = nd + 1 + np.where(line_first, len(head), 0)
-    end = np.cumsum(width)
-    out = np.empty(int(end[-1]) if len(end) else 0, np.uint8)
-    last = end - 2                                                           # position of the last digit
-    out[end - 1] = seps
-    for j in range(int(nd.max()) if len(nd) else 0):
-        m = nd > j
-        out[last[m] - j] = 48 + (values[m] // powers[j]) % 10
-    starts = (end - width)[line_first]
-    for i, c in enumerate(head):
-        out[starts + i] = c
-    return out.tobytes().decode('ascii')
+    nd = np.maximum(np.searchsorted(powers, k, side='right'), 1)           # digits of each number
+    D = int(nd[-1])
+    table = np.empty((len(k), D), np.uint8)                                 # left-aligned digits
+    for j in range(D):
+        table[:, j] = 48 + (k // powers[np.maximum(nd - 1 - j, 0)]) % 10
+    table_rows = table.view(f'V{D}').ravel()                                # one item per row: fast gathers
+    H = len(head)
+    seps = np.asarray(seps, np.uint8)
+    line_first = np.asarray(line_first, bool)
+    width = np.arange(D + 1)
+    out = []
+    for c0 in range(0, len(values), chunk):
+        v = values[c0:c0 + chunk]
+        r = len(v)
+        rows = np.empty((r, H + D + 1), np.uint8)
+        rows[:, :H] = np.frombuffer(head, np.uint8)
+        rows[:, H:H + D] = table_rows[v].view(np.uint8).reshape(r, D)
+        lens = nd[v]
+        rows[np.arange(r), H + lens] = seps[c0:c0 + chunk]
+        keep = np.empty(rows.shape, bool)
+        keep[:, :H] = line_first[c0:c0 + chunk, None]
+        np.less_equal(width, lens[:, None], out=keep[:, H:])
+        out.append(rows[keep].tobytes())
+    return b''.join(out)
 
 
 def _face_text(F, T=None):
-    """``f`` lines of faces ``F`` ((m,k) int array or list of 0-based polygons), with ``vt`` indices
-    ``T`` (the same structure) written as ``v/vt`` when given."""
+    """``f`` lines (ASCII bytes) of faces ``F`` ((m,k) int array or list of 0-based polygons), with
+    ``vt`` indices ``T`` (the same structure) written as ``v/vt`` when given."""
     if isinstance(F, np.ndarray) and F.ndim == 2:
         corners = np.asarray(F, np.int64).ravel()
         sizes = np.full(len(F), F.shape[1])
@@ -311,7 +328,7 @@ def _face_text(F, T=None):
         corners = np.concatenate(polys) if polys else np.zeros(0, np.int64)
         sizes = np.array([len(f) for f in polys], np.int64)
     if not len(corners):
-        return ''
+        return b''
     last = np.zeros(len(corners), bool)
     last[np.cumsum(sizes) - 1] = True
     first = np.zeros(len(corners), bool)
@@ -338,15 +355,15 @@ def write_obj(path, V, F, UV=None, UV_faces=None, v_text=None):
     Written to a temporary file first, so a failure leaves no partial output."""
     V = np.asarray(V, np.float64).reshape(-1, 3)
     if v_text is not None and v_text.count(b'\n') == len(V) and (not V.size or v_text.endswith(b'\n')):
-        parts = [v_text.decode('ascii')]
+        parts = [v_text]
     else:
-        parts = [_format_rows(V, '%.17g', 'v ')]
+        parts = [_format_rows(V, '%.17g', 'v ').encode('ascii')]
     if UV is not None:
-        parts.append(_format_rows(np.asarray(UV, np.float64).reshape(-1, 2), '%.17g', 'vt '))
+        parts.append(_format_rows(np.asarray(UV, np.float64).reshape(-1, 2), '%.17g', 'vt ').encode('ascii'))
         parts.append(_face_text(F, F if UV_faces is None else UV_faces))
     else:
         parts.append(_face_text(F))
-    write_text(path, ''.join(parts))
+    write_text(path, b''.join(parts))
 
 
 def write_values(path, values):
@@ -356,15 +373,16 @@ def write_values(path, values):
 
 
 def write_text(path, text):
-    """Write ``text`` to ``path`` through a temporary file in the same folder renamed into place, so a
-    failure leaves neither a partial output nor the temporary file. Raises ``ConformalError``."""
+    """Write ``text`` (str, or bytes written as they are) to ``path`` through a temporary file in the
+    same folder renamed into place, so a failure leaves neither a partial output nor the temporary
+    file. Raises ``ConformalError``."""
     folder = os.path.dirname(os.path.abspath(path))
     try:
         fd, tmp = tempfile.mkstemp(prefix='.conformal-', suffix='.tmp', dir=folder)
     except OSError as exc:
         raise ConformalError(f"cannot write {path}: {exc.strerror}") from None
     try:
-        with os.fdopen(fd, 'w') as fh:
+        with os.fdopen(fd, 'wb' if isinstance(text, bytes) else 'w') as fh:
             fh.write(text)
         umask = os.umask(0)
         os.umask(umask)

@@ -99,14 +99,17 @@ def fill_order(points, K, min_size=None, leaf=ND_LEAF):
     if k < (ND_MIN if min_size is None else min_size):
         return None
     X = np.asarray(points, np.float64).reshape(k, -1)
+    cols = [np.ascontiguousarray(X[:, d]) for d in range(X.shape[1])]
+    flat = np.ascontiguousarray(X).ravel()
     C = sp.triu(sp.coo_matrix(K), 1).tocoo()
-    ei, ej = C.row.astype(np.int64), C.col.astype(np.int64)
+    idx = np.int32 if 2 * k < 2 ** 31 - 1 else np.int64
+    ei, ej = C.row.astype(idx), C.col.astype(idx)
+    del C
     pos = np.empty(k, np.int64)              # output position of each row
     work = np.arange(k)                      # rows of the open parts, grouped by part
     part = np.zeros(k, np.int64)             # part of each entry of work (non-decreasing)
     lo_pos, size = np.zeros(1, np.int64), np.array([k])     # output range of each open part
-    part_of = np.empty(k, np.int64)
-    second = np.empty(k, bool)
+    code = np.full(k, -1, idx)               # 2 * part + (second half) of the rows being split, else -1
     sep = np.zeros(k, bool)
     while len(work):
         first = np.zeros(len(size), np.int64)
@@ -123,22 +126,24 @@ def fill_order(points, K, min_size=None, leaf=ND_LEAF):
         lo_pos, size = lo_pos[big], size[big]
         first = np.zeros(len(size), np.int64)
         np.cumsum(size[:-1], out=first[1:])
-        P = X[work]
-        lo = np.minimum.reduceat(P, first, axis=0)
-        ext = np.maximum.reduceat(P, first, axis=0) - lo
+        Pw = [c[work] for c in cols]
+        lo = np.stack([np.minimum.reduceat(c, first) for c in Pw], 1)
+        ext = np.stack([np.maximum.reduceat(c, first) for c in Pw], 1) - lo
         axis = np.argmax(ext, axis=1)
         a = axis[part]
         span = ext[np.arange(len(size)), axis] * (1 + 1e-9) + 1e-300
-        key = part + (P[np.arange(len(work)), a] - lo[part, a]) / span[part]      # in [part, part+1)
+        d = len(cols)
+        key = part + (flat[work * d + a] - lo.ravel()[part * d + a]) / span[part]      # in [part, part+1)
         o = np.argsort(key, kind='stable')
         work = work[o]
         rank = np.arange(len(work)) - first[part]
         side = rank >= (size // 2)[part]     # the second half of each part
-        part_of[work], second[work] = part, side
-        same = (part_of[ei] == part_of[ej]) & (part_of[ei] >= 0)
-        ei, ej = ei[same], ej[same]          # edges between parts never matter again
-        cut = second[ei] != second[ej]
-        sep[np.where(second[ei[cut]], ei[cut], ej[cut])] = True
+        code[work] = 2 * part + side
+        # edges inside a part: those between its halves put their second-half end in the separator;
+        # edges between parts or touching a separator never matter again
+        ci, cj = code[ei], code[ej]
+        cut = ((ci >> 1) == (cj >> 1)) & (ci != cj) & (ci >= 0)
+        sep[np.where(ci[cut] & 1, ei[cut], ej[cut])] = True
         is_sep = sep[work]
         n_sep = np.bincount(part, is_sep, minlength=len(size)).astype(np.int64)
         n_first = np.bincount(part, ~side, minlength=len(size)).astype(np.int64)
@@ -146,7 +151,7 @@ def fill_order(points, K, min_size=None, leaf=ND_LEAF):
             sp_part = part[is_sep]
             start = np.searchsorted(sp_part, np.arange(len(size)))
             pos[work[is_sep]] = (lo_pos + size - n_sep)[sp_part] + np.arange(len(sp_part)) - start[sp_part]
-        alive = ~sep[ei] & ~sep[ej]
+        alive = (ci == cj) & (ci >= 0) & ~sep[ei] & ~sep[ej]
         ei, ej = ei[alive], ej[alive]
         keep = ~is_sep
         work, part = work[keep], 2 * part[keep] + side[keep]      # still grouped: first half first
@@ -155,7 +160,7 @@ def fill_order(points, K, min_size=None, leaf=ND_LEAF):
         nonempty = size > 0
         part = (np.cumsum(nonempty) - 1)[part]
         lo_pos, size = lo_pos[nonempty], size[nonempty]
-        part_of[:] = -1
+        code[:] = -1
     order = np.empty(k, np.int64)
     order[pos] = np.arange(k)
     return order
