@@ -19,16 +19,19 @@ Laplacian) and keeps the step, or a half or quarter of it, only if the realised 
 no flipped triangle and conformality inside the budget.
 """
 import numpy as np
-from scipy.optimize import linprog
 import scipy.sparse as sp
 
 from ..errors import ConformalError
 from ..mesh.measures import singular_values
 
-try:            # HiGHS's own binding: a model kept between rounds, re-solved from its last basis
-    from highspy import _core as _highs
-except ImportError:                      # pragma: no cover - without it every round solves from scratch
-    _highs = None
+def _highs_core():
+    """HiGHS's own binding (``highspy._core``: a model kept between rounds, re-solved from its last
+    basis), imported on first use (``area`` does not need it), or None when it is not installed."""
+    try:
+        from highspy import _core
+    except ImportError:                  # pragma: no cover - without it every round solves from scratch
+        return None
+    return _core
 
 
 class _RowLP:
@@ -46,6 +49,7 @@ class _RowLP:
         self.presolve = presolve
         self.blocks = []
         self.h = None
+        _highs = self._highs = _highs_core()
         if _highs is not None:
             h = self.h = _highs._Highs()
             h.setOptionValue('output_flag', False)
@@ -73,7 +77,7 @@ class _RowLP:
             starts = np.arange(0, r * k, k, dtype=np.int32)
             index = np.tile(np.arange(k, dtype=np.int32), r)
             value = np.ascontiguousarray(A).ravel()
-        inf = _highs.kHighsInf
+        inf = self._highs.kHighsInf
         self.h.addRows(len(row_lo), np.where(np.isfinite(row_lo), row_lo, -inf),
                        np.where(np.isfinite(row_hi), row_hi, inf), len(value), starts, index, value)
 
@@ -82,9 +86,10 @@ class _RowLP:
         solver failure)."""
         if self.h is not None:
             self.h.run()
-            if self.h.getModelStatus() != _highs.HighsModelStatus.kOptimal:
+            if self.h.getModelStatus() != self._highs.HighsModelStatus.kOptimal:
                 return None
             return np.array(self.h.getSolution().col_value)
+        from scipy.optimize import linprog   # only without highspy: scipy.optimize costs 0.1 s to import
         A = sp.vstack([sp.csr_matrix(b[0]) for b in self.blocks]).tocsr()
         lo = np.concatenate([b[1] for b in self.blocks])
         hi = np.concatenate([b[2] for b in self.blocks])
