@@ -226,3 +226,24 @@ def test_flatten_same_map_with_nested_dissection(monkeypatch):
     assert np.abs(a.uv - b.uv).max() < 1e-9 * np.abs(a.uv).max()
     for key in ('mu_ratio', 'qc_mean', 'flips'):
         assert b.report[key] == pytest.approx(a.report[key], rel=1e-9)
+
+
+def test_deferred_factor_in_turn_gives_the_same_map(monkeypatch):
+    """Above PARALLEL_MAX rows the two factorisations run in turn, the second on its own thread
+    (FactorJob) while the first one's solves go on: the same map, and a singular matrix still raises
+    ConformalError, from result()."""
+    V, F = make_surface('ridge', 49)
+    monkeypatch.delenv('CONFORMAL_SOLVER', raising=False)
+    a = flatten(V, F, boundary='area')
+    monkeypatch.setattr(solve, 'PARALLEL_MAX', 100)
+    monkeypatch.setattr(solve, 'WORKERS', 2)
+    info = check_mesh(V, F, kind='disk')
+    system = DiskSystem(normalise_scale(V)[0], F, info.boundary)
+    assert isinstance(system._neumann, solve.FactorJob)
+    b = flatten(V, F, boundary='area')
+    assert np.abs(a.uv - b.uv).max() < 1e-12 * np.abs(a.uv).max()
+    for key in ('mu_ratio', 'qc_mean', 'flips'):
+        assert b.report[key] == pytest.approx(a.report[key], rel=1e-12)
+    job = solve.FactorJob(sp.csc_matrix((3, 3)))
+    with pytest.raises(ConformalError):
+        job.result()

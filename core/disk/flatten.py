@@ -27,7 +27,7 @@ from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians, signed_uv_areas
 from ..mesh.intrinsic import intrinsic_delaunay
-from ..mesh.solve import Factor, backend, factor_all, fill_order, sub_order
+from ..mesh.solve import Factor, FactorJob, backend, factor_all, fill_order, sub_order
 from .lscm import lscm
 from .uniform import optimise, vertex_bound
 from ..mesh.validate import check_mesh, degenerate_faces, normalise_scale, DEFAULT_MAX_FACES
@@ -124,8 +124,9 @@ class DiskSystem:
         if neumann and len(self.I):
             # L_II for the Yamabe and harmonic solves, L without one vertex for the conjugate; on big
             # meshes both in one nested dissection order of the vertices (docs/scale.md)
+            # (factored in turn, the second on a thread that the first solves overlap: FactorJob)
             order = fill_order(V, self.L)
-            self._II, self._neumann = factor_all(self.L_II, self.L[keep][:, keep],
+            self._II, self._neumann = factor_all(self.L_II, self.L[keep][:, keep], defer_last=True,
                                                  orders=(sub_order(order, self.I), sub_order(order, keep)))
         else:
             self._II = Factor(self.L_II) if len(self.I) else None
@@ -133,6 +134,9 @@ class DiskSystem:
         self.Omega = np.where(mask, 0.0, 2 * np.pi - s)
         self.k = np.pi - s[self.B]
         self.l = np.linalg.norm(V[np.roll(self.B, -1)] - V[self.B], axis=1)
+        self._frames = None
+        if isinstance(self._neumann, FactorJob):
+            self._frames, _ = local_frames(V, F)   # needed to measure any map: made while the job runs
 
     # --- step 2: interior log scale factors -----------------------------------------------------
     def solve_II(self, b):
@@ -200,6 +204,8 @@ class DiskSystem:
         for it."""
         if self._neumann is None:
             self._neumann = Factor(self.L[self._keep][:, self._keep])
+        elif isinstance(self._neumann, FactorJob):
+            self._neumann = self._neumann.result()
         b = np.zeros(self.n)
         b[self.B] = 0.5 * (x[np.roll(self.B, 1)] - x[np.roll(self.B, -1)])
         y = np.zeros(self.n)
@@ -223,7 +229,7 @@ class DiskSystem:
 
     def jacobians(self, uv):
         """Per-triangle Jacobians (m,2,2) of a UV map (n,2); the triangles' own frames are cached."""
-        if getattr(self, '_frames', None) is None:
+        if self._frames is None:
             self._frames, _ = local_frames(self.V, self.F)
         with np.errstate(divide='ignore', invalid='ignore'):       # zero-area triangles: inf/NaN
             return jacobians_from_frames(self._frames, self.F, uv)

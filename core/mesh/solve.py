@@ -25,6 +25,7 @@ on two threads. ``sub_order`` restricts one order of all vertices to a submatrix
 all but one vertex), so one ordering serves every matrix of a mesh.
 """
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -60,21 +61,53 @@ def backend(size=None):
     return 'superlu'
 
 
-def factor_all(*matrices, orders=None):
+def factor_all(*matrices, orders=None, defer_last=False):
     """``Factor`` of each matrix (with ``orders``: one fill-reducing order or None per matrix).
     SuperLU releases the GIL, so its factorisations run on two threads up to ``PARALLEL_MAX`` rows in
     all (above, two factorisations' work space at once would lift the peak memory of a 1M-triangle
-    disk from 1.9 GB to 2.3 GB; docs/scale.md); CHOLMOD's binding holds the GIL (two threads measured
-    no faster), so its factorisations run in turn."""
+    disk from 1.8 GB to 2.1 GB; docs/scale.md); CHOLMOD's binding holds the GIL (two threads measured
+    no faster), so its factorisations run in turn.
+
+    ``defer_last``: when SuperLU factorisations run in turn on a machine with two or more cores, the
+    last one runs on its own thread and comes back as a ``FactorJob`` (``result()`` gives its Factor),
+    so the caller's work with the others (solves, numpy; both release the GIL) overlaps it: the
+    memory is that of factorisations in turn."""
     orders = list(orders) if orders is not None else [None] * len(matrices)
     if len(orders) != len(matrices):
         raise ConformalError(f"{len(orders)} orders for {len(matrices)} matrices")
     methods = [_method(K.shape[0], o) for K, o in zip(matrices, orders)]
     if WORKERS < 2 or len(matrices) < 2 or 'cholmod' in methods or \
             sum(K.shape[0] for K in matrices) > PARALLEL_MAX:
+        if defer_last and WORKERS > 1 and methods[-1] == 'superlu' and len(matrices) > 1:
+            done = [Factor(K, order=o) for K, o in zip(matrices[:-1], orders[:-1])]
+            return done + [FactorJob(matrices[-1], order=orders[-1])]
         return [Factor(K, order=o) for K, o in zip(matrices, orders)]
     with ThreadPoolExecutor(min(WORKERS, len(matrices))) as ex:
         return list(ex.map(lambda ko: Factor(ko[0], order=ko[1]), zip(matrices, orders)))
+
+
+class FactorJob:
+    """``Factor(K, order=order)`` computed on its own thread (SuperLU releases the GIL, so the caller
+    goes on meanwhile). ``result()`` waits and returns the ``Factor``, or raises its error; it may be
+    called from several threads."""
+
+    def __init__(self, K, order=None):
+        self._out = None
+        self._thread = threading.Thread(target=self._run, args=(K, order), daemon=True)
+        self._thread.start()
+
+    def _run(self, K, order):
+        try:
+            self._out = (Factor(K, order=order), None)
+        except BaseException as exc:           # handed to the caller of result()
+            self._out = (None, exc)
+
+    def result(self):
+        self._thread.join()
+        factor, exc = self._out
+        if exc is not None:
+            raise exc
+        return factor
 
 
 def _method(size, order):
