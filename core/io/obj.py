@@ -144,9 +144,12 @@ def _parse_numbers(sub, dtype):
 
 def _line_bytes(buf, starts, ends, pick):
     """The bytes of the lines ``pick`` (bool per line) of ``buf`` (uint8), each ending in a newline,
-    concatenated (uint8), and the offsets of their first bytes in that array."""
-    keep = np.repeat(pick, ends - starts + 1)
-    out = buf[keep]
+    concatenated (a new, writable uint8 array), and the offsets of their first bytes in that array."""
+    rows = np.flatnonzero(pick)
+    if len(rows) and rows[-1] - rows[0] + 1 == len(rows):     # one block of lines (the usual OBJ)
+        out = buf[starts[rows[0]]:ends[rows[-1]] + 1].copy()
+    else:
+        out = buf[np.repeat(pick, ends - starts + 1)]
     lens = (ends - starts + 1)[pick]
     first = np.zeros(len(lens), np.int64)
     np.cumsum(lens[:-1], out=first[1:])
@@ -217,7 +220,6 @@ def _read_fast(data):
     sub, first = _line_bytes(buf, starts, ends, is_f)
     nf = len(first)
     if nf:
-        sub = sub.copy()
         sub[first] = _SP
         digit = (sub >= 48) & (sub <= 57)
         slash, minus = sub == _SLASH, sub == _MINUS
@@ -243,14 +245,15 @@ def _read_fast(data):
         idx = val[f0]
         if (sizes < 3).any() or (idx == 0).any():
             return None
-        line_of = np.repeat(np.flatnonzero(is_f), sizes)
-        corners = np.where(idx > 0, idx - 1, nv_before[line_of] + idx)
-        tok_of_run = np.cumsum(f0) - 1
+        negative = (idx < 0).any()
+        line_of = np.repeat(np.flatnonzero(is_f), sizes) if negative or f1.any() else None
+        corners = np.where(idx > 0, idx - 1, nv_before[line_of] + idx) if negative else idx - 1
         cuv = np.full(len(tok), -1, np.int64)
-        t1 = tok_of_run[f1]
-        tv = val[f1]
-        rel = nvt_before[line_of[t1]] + tv
-        cuv[t1] = np.where(tv > 0, tv - 1, np.where(tv < 0, rel, -1))
+        if f1.any():
+            t1 = (np.cumsum(f0) - 1)[f1]
+            tv = val[f1]
+            rel = nvt_before[line_of[t1]] + tv
+            cuv[t1] = np.where(tv > 0, tv - 1, np.where(tv < 0, rel, -1))
     else:
         corners = cuv = sizes = np.zeros(0, np.int64)
 
