@@ -250,12 +250,12 @@ def normalise_uv(V, F, uv, fit='true_scale', area=None):
     a = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
     c = (W.mean(axis=1) * a[:, None]).sum(0) / a.sum()
     uv = uv - c
-    C = (uv * np.bincount(F.ravel(), np.repeat(np.abs(a), 3), minlength=len(uv))[:, None]).T @ uv
+    wt = np.bincount(F.ravel(), np.repeat(np.abs(a), 3), minlength=len(uv))
+    C = (uv * wt[:, None]).T @ uv
     w, R = np.linalg.eigh(C)
     R = R[:, ::-1]
     # an eigenvector's sign is arbitrary: choose the one with the positive third moment along the
     # main axis, so that the result does not depend on the order of vertices or faces
-    wt = np.bincount(F.ravel(), np.repeat(np.abs(a), 3), minlength=len(uv))
     if (wt * (uv @ R[:, 0]) ** 3).sum() < 0:
         R[:, 0] *= -1
     if np.linalg.det(R) < 0:
