@@ -6,11 +6,13 @@
     .venv/bin/python bench/scale.py --with-4m --modes area --solvers cholmod
 
 Each case is one child process, timed from spawn to exit (interpreter start, imports, OBJ read,
-flatten, OBJ write), with its own peak resident set size from ``os.wait4``; ``--repeat`` takes the
-median. The report's own timings (``--json``) split the core's part: factor, solve, total. The
-input OBJ files are written once into ``--cache`` (default: a folder under the system temp dir).
-``--solvers`` runs each case with ``CONFORMAL_SOLVER`` set (``auto``: the core chooses by size; ``superlu``
-or ``cholmod`` force one backend).
+flatten, OBJ write), with its own peak resident set size from ``os.wait4``; ``--repeat`` runs every
+case that many times, interleaved (one round over all cases, then the next), and takes the medians.
+The children keep Python's bytecode caches, as a user's installation does. The report's own timings
+(``--json``) split the core's part: factor, solve, total. The input OBJ files are written once into
+``--cache`` (default: a folder under the system temp dir). ``--solvers`` runs each case with
+``CONFORMAL_SOLVER`` set (``auto``: the core chooses by size; ``superlu`` or ``cholmod`` force one
+backend).
 The anchors printed with the table are the BFF command-line tool's figures measured on this machine
 for issue 16 (BFF's binary is not shipped here): wall time 0.35 s at 33k, 1.78 s at 100k, 8.5 s at
 403k, 18.9 s at 1M; peak memory 1.33 GB at 1M.
@@ -95,41 +97,57 @@ def main():
     print(f"backend available here: {backend()} (python {sys.version.split()[0]})")
     print("BFF anchors (issue 16, BFF binary not available here): "
           + ', '.join(f"n={n} {s} s" for n, s in BFF_SECONDS.items()) + ", 1.33 GB peak at 1M")
-    env0 = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get('PYTHONPATH', ''))
+    # as on a user's machine: Python keeps its bytecode caches (a development shell may turn them off)
+    env0 = {k: v for k, v in os.environ.items() if k != 'PYTHONDONTWRITEBYTECODE'}
+    env0['PYTHONPATH'] = ROOT + os.pathsep + os.environ.get('PYTHONPATH', '')
+    run_process([sys.executable, '-m', 'core', 'flatten', '--help'], env0)      # writes the caches
     print(f"interpreter start + imports: {startup_seconds(env0):.2f} s; {load_note()}")
-    print("| triangles | mode | solver | wall s | CPU s | core total s | factor s | solve s | I/O+start s "
-          "| peak MB | vs BFF time | vs BFF mem | mu_ratio | qc_mean | flips |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    cases = []
     for size in sizes:
         n = grid_n(size)
-        path = mesh_file(args.cache, n)
-        out_path = os.path.join(args.cache, f'out_{n}.obj')
         for mode in args.modes:
             if mode == 'uniform' and size > args.uniform_max:
                 continue
-            for solver in args.solvers:
-                env = dict(env0, CONFORMAL_SOLVER=solver)
-                argv = [sys.executable, '-m', 'core', 'flatten', path, out_path, '--boundary', mode, '--json']
-                runs = []
-                try:
-                    for _ in range(args.repeat):
-                        wall, peak, out, cpu = run_process(argv, env)
-                        runs.append((wall, peak, json.loads(out.strip().splitlines()[-1]), cpu))
-                except RuntimeError as exc:
-                    print(f"| {2 * (n - 1) ** 2:,} | {mode} | {solver} | failed: {exc} |")
-                    continue
-                runs.sort(key=lambda r: r[0])
-                wall, peak, rep, cpu = runs[len(runs) // 2]
-                sec = rep['seconds']
-                bff = BFF_SECONDS.get(n)
-                bff_m = BFF_PEAK_MB.get(n)
-                print(f"| {rep['faces']:,} | {mode} | {rep.get('solver', solver)} | {wall:.2f} | {cpu:.2f} | "
-                      f"{sec['total']:.2f} | {sec['factor']:.2f} | {sec['solve']:.2f} | "
-                      f"{wall - sec['total']:.2f} | {statistics.median(r[1] for r in runs):.0f} | "
-                      f"{f'{wall / bff:.2f}x' if bff else ''} | {f'{peak / bff_m:.2f}x' if bff_m else ''} | "
-                      f"{rep['mu_ratio']:.4f} | {rep['qc_mean']:.4f} | {rep['flips']} |", flush=True)
-        if os.path.exists(out_path):
-            os.remove(out_path)
+            cases += [(n, mode, solver) for solver in args.solvers]
+    # interleaved: every case once per round, so a change of load hits all of them alike
+    runs = {c: [] for c in cases}
+    failed = {}
+    for _ in range(args.repeat):
+        for case in cases:
+            n, mode, solver = case
+            if case in failed:
+                continue
+            path = mesh_file(args.cache, n)
+            out_path = os.path.join(args.cache, f'out_{n}.obj')
+            env = dict(env0, CONFORMAL_SOLVER=solver)
+            argv = [sys.executable, '-m', 'core', 'flatten', path, out_path, '--boundary', mode, '--json']
+            try:
+                wall, peak, out, cpu = run_process(argv, env)
+                runs[case].append((wall, peak, json.loads(out.strip().splitlines()[-1]), cpu))
+            except RuntimeError as exc:
+                failed[case] = exc
+            if os.path.exists(out_path):
+                os.remove(out_path)
+    print(f"medians of {args.repeat} interleaved runs; {load_note()}")
+    print("| triangles | mode | solver | wall s | CPU s | core total s | factor s | solve s | I/O+start s "
+          "| peak MB | vs BFF time | vs BFF mem | mu_ratio | qc_mean | flips |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for case in cases:
+        n, mode, solver = case
+        if case in failed:
+            print(f"| {2 * (n - 1) ** 2:,} | {mode} | {solver} | failed: {failed[case]} |")
+            continue
+        rs = sorted(runs[case], key=lambda r: r[0])
+        wall, peak, rep, cpu = rs[len(rs) // 2]
+        sec = rep['seconds']
+        bff = BFF_SECONDS.get(n)
+        bff_m = BFF_PEAK_MB.get(n)
+        peak = statistics.median(r[1] for r in rs)
+        print(f"| {rep['faces']:,} | {mode} | {rep.get('solver', solver)} | {wall:.2f} | {cpu:.2f} | "
+              f"{sec['total']:.2f} | {sec['factor']:.2f} | {sec['solve']:.2f} | "
+              f"{wall - sec['total']:.2f} | {peak:.0f} | "
+              f"{f'{wall / bff:.2f}x' if bff else ''} | {f'{peak / bff_m:.2f}x' if bff_m else ''} | "
+              f"{rep['mu_ratio']:.4f} | {rep['qc_mean']:.4f} | {rep['flips']} |", flush=True)
 
 
 if __name__ == '__main__':
