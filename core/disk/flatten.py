@@ -138,6 +138,13 @@ class DiskSystem:
         if isinstance(self._neumann, FactorJob):
             self._frames, _ = local_frames(V, F)   # needed to measure any map: made while the job runs
 
+    @property
+    def conjugate_pending(self):
+        """True while the Neumann factorisation still runs on its own thread (big meshes, see
+        ``factor_all(defer_last=True)``): until ``conjugate`` is first called, solves with ``L_II``
+        overlap it."""
+        return isinstance(self._neumann, FactorJob)
+
     # --- step 2: interior log scale factors -----------------------------------------------------
     def solve_II(self, b):
         """``L_II^-1 b`` for (nI,) or (nI,r) ``b``. From ``MANY_RHS`` columns on, when ``L_II`` is

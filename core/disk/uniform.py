@@ -264,6 +264,8 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
         s = _face_log_scale(system, uv, keep)
         return s
 
+    # on big meshes the Neumann factor may still be on its way: the boundary response needs only L_II
+    H = system.harmonic(Phi) if system.conjugate_pending else None
     u0 = system.yamabe(np.zeros(nb))
     uv0 = system.map_from_u(u0)
     s0 = log_scale(uv0)
@@ -280,7 +282,8 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
                          'basis_size': int(Phi.shape[1]), 'qc_budget': round(qc_budget, 5),
                          'area_certified': f"the area map's ratio is within {min_gain:g} of 1"}
     progress(0.15, 'boundary response')
-    H = system.harmonic(Phi)                          # (n, K): response of u to the coefficients
+    if H is None:
+        H = system.harmonic(Phi)                      # (n, K): response of u to the coefficients
     Fk = system.F[keep]
     rows = np.repeat(np.arange(len(Fk)), 3)
     avg = sp.csr_matrix((np.full(3 * len(Fk), 1.0 / 3.0), (rows, Fk.ravel())), shape=(len(Fk), system.n))
