@@ -287,7 +287,8 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     Fk = system.F[keep]
     rows = np.repeat(np.arange(len(Fk)), 3)
     avg = sp.csr_matrix((np.full(3 * len(Fk), 1.0 / 3.0), (rows, Fk.ravel())), shape=(len(Fk), system.n))
-    JF = avg @ H                                      # (m, K): linear model of s_T (face means)
+    # the linear model of s_T (face means of H) is needed only on each round's representatives:
+    # avg[reps] @ H, never the whole (m, K) matrix (256 MB at 1M triangles)
     best = dict(c=np.zeros(Phi.shape[1]), u=u0, uv=uv0, s=s0, spread=float(s0.max() - s0.min()),
                 qc=qc0)
     delta = best['spread']
@@ -298,7 +299,7 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
         if maps >= max_maps:
             break
         reps = _representatives(system, best['uv'], best['s'], keep, bins)
-        a, predicted = _model_lp(best['s'][reps], JF[reps], best['c'], delta, reg_w, active)
+        a, predicted = _model_lp(best['s'][reps], avg[reps] @ H, best['c'], delta, reg_w, active)
         if a is None or best['spread'] - predicted < 1e-3 * best['spread']:
             break                         # no gain in this box, nor in any smaller one
         accepted = False
