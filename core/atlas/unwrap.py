@@ -118,9 +118,7 @@ def _plain_disk(V, F, seams, max_faces):
         info = check_mesh(V, F, kind='surface', max_faces=max_faces, allow_parts=True)
     except ConformalError:
         return False, None
-    if len(info.loops) != 1 or info.euler != 1:
-        return False, None
-    if topology.face_components(F, len(V))[0] != 1:
+    if len(info.loops) != 1 or info.euler != 1 or info.parts != 1:
         return False, None
     return True, info.loops
 
