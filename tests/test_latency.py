@@ -68,3 +68,30 @@ def test_check_mesh_counts_parts_and_unwrap_dispatch_uses_it():
     two = unwrap(V2, F2, boundary='area')
     assert one.report['path'] == 'disk' and one.report['flips'] == 0
     assert two.report['path'] == 'islands' and two.report['islands'] == 2 and two.report['flips'] == 0
+
+
+def test_disk_dispatch_checks_once_and_flattens_the_same(monkeypatch):
+    """``unwrap``'s disk path hands its check's boundary loop to ``flatten`` (``checked_loop``): the
+    mesh is checked once, and the map is the one ``flatten`` makes after its own check."""
+    import core.atlas.unwrap as unwrap_mod
+    import core.disk.flatten as flatten_mod
+    from core.disk.flatten import flatten
+    from core.surfaces import make_surface
+    V, F = make_surface('bump3', 17)
+    calls = []
+    real = check_mesh
+
+    def counting(*a, **k):
+        calls.append(k.get('kind'))
+        return real(*a, **k)
+    monkeypatch.setattr(unwrap_mod, 'check_mesh', counting)
+    monkeypatch.setattr(flatten_mod, 'check_mesh', counting)
+    res = unwrap(V, F, boundary='uniform', fit='true_scale', bound=True)
+    assert res.report['path'] == 'disk' and len(calls) == 1
+    monkeypatch.undo()
+    ref = flatten(V, F, boundary='uniform', bound=True)
+    assert np.array_equal(res.uv, ref.uv)
+    assert res.report['bound_vertex'] == ref.report['bound_vertex']
+    loop = check_mesh(V, F).boundary
+    again = flatten(V, F, boundary='uniform', bound=True, checked_loop=loop)
+    assert np.array_equal(again.uv, ref.uv) and again.report['mu_ratio'] == ref.report['mu_ratio']

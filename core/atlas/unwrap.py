@@ -160,7 +160,8 @@ def island_warnings(rep: dict, desc: str) -> list:
 
 def _disk(V, F, loops, boundary, fit, max_faces, progress, options):
     """The disk path: ``flatten`` with the requested fit. Returns (uv (n,2), mu (m,), island report)."""
-    res = flatten(V, F, boundary=boundary, fit=fit, max_faces=max_faces, progress=progress, **options)
+    res = flatten(V, F, boundary=boundary, fit=fit, max_faces=max_faces, progress=progress,
+                  checked_loop=loops[0], **options)      # _plain_disk has checked V, F
     if not np.isfinite(res.uv).all():
         raise ConformalError("the flattening produced non-finite UVs: the mesh is numerically too "
                              "degenerate", 'degenerate', 'clean_mesh')
