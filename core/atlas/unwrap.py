@@ -118,9 +118,7 @@ def _plain_disk(V, F, seams, max_faces):
         info = check_mesh(V, F, kind='surface', max_faces=max_faces, allow_parts=True)
     except ConformalError:
         return False, None
-    if len(info.loops) != 1 or info.euler != 1:
-        return False, None
-    if topology.face_components(F, len(V))[0] != 1:
+    if len(info.loops) != 1 or info.euler != 1 or info.parts != 1:
         return False, None
     return True, info.loops
 
@@ -162,7 +160,8 @@ def island_warnings(rep: dict, desc: str) -> list:
 
 def _disk(V, F, loops, boundary, fit, max_faces, progress, options):
     """The disk path: ``flatten`` with the requested fit. Returns (uv (n,2), mu (m,), island report)."""
-    res = flatten(V, F, boundary=boundary, fit=fit, max_faces=max_faces, progress=progress, **options)
+    res = flatten(V, F, boundary=boundary, fit=fit, max_faces=max_faces, progress=progress,
+                  checked_loop=loops[0], **options)      # _plain_disk has checked V, F
     if not np.isfinite(res.uv).all():
         raise ConformalError("the flattening produced non-finite UVs: the mesh is numerically too "
                              "degenerate", 'degenerate', 'clean_mesh')

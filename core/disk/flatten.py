@@ -291,7 +291,7 @@ def _warnings(report, qc_limit=QC_WARN):
 
 
 def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FACES, bound=None,
-            progress=None, real_faces=None, operators='auto', **options) -> FlattenResult:
+            progress=None, real_faces=None, operators='auto', checked_loop=None, **options) -> FlattenResult:
     """Flatten a disk-topology triangle mesh conformally.
 
     V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise. boundary: 'free', 'area' or
@@ -304,19 +304,22 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     mollification, docs/math.md), 'intrinsic' (always) or 'extrinsic' (the mesh's own cotan weights).
     Zero-area triangles are accepted: the intrinsic mollification gives them a valid metric, and they
     are left out of the objective and the measures (``report['degenerate_faces']``).
-    Extra ``options`` go to ``core.disk.uniform.optimise``.
+    checked_loop: the boundary loop (k,) of a caller that has just run ``check_mesh`` on these very
+    arrays with checks at least as strict as the disk check (``unwrap``'s disk dispatch); the checks
+    are then not repeated. Extra ``options`` go to ``core.disk.uniform.optimise``.
     Returns ``FlattenResult``; ``report['warnings']`` (list of str) lists flips, qc_mean above 1.5,
     fallbacks. Raises ``ConformalError`` on bad input."""
     # LSCM has no maximum principle to restore and measures slightly worse on the intrinsic
     # triangulation of smooth grids (bench/flatten_table.py): 'auto' tries the mesh's own weights first
     first, second = ('extrinsic', 'intrinsic') if boundary == 'free' else ('auto', 'extrinsic')
     res = _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces,
-                   first if operators == 'auto' else operators, **options)
+                   first if operators == 'auto' else operators, checked_loop, **options)
     r = res.report
     if operators == 'auto' and r['operators'].get('intrinsic') != (second == 'intrinsic') and \
             not r.get('degenerate_faces') and (r['flips'] or not r['qc_mean'] <= QC_WARN or 'fallback' in r):
         # the first operators did not give a clean map here: try the others and keep the better
-        alt = _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, second, **options)
+        alt = _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, second, checked_loop,
+                       **options)
         if _quality_key(alt.report) < _quality_key(r):
             alt.report['operators']['tried_first'] = {k: r[k] for k in ('flips', 'qc_mean', 'mu_ratio')}
             return alt
@@ -330,7 +333,8 @@ def _quality_key(r):
             -(mu if np.isfinite(mu) else 0.0))
 
 
-def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operators, **options):
+def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operators, checked_loop=None,
+             **options):
     """``flatten`` with one choice of operators."""
     if boundary not in BOUNDARY_MODES:
         raise ConformalError(f"unknown boundary mode {boundary!r}: use one of {', '.join(BOUNDARY_MODES)}")
@@ -339,7 +343,8 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     report_progress = progress or (lambda f, msg: None)
     timings = {}
     t0 = time.perf_counter()
-    info = check_mesh(V, F, kind='disk', max_faces=max_faces, allow_degenerate=True)
+    loop = check_mesh(V, F, kind='disk', max_faces=max_faces, allow_degenerate=True).boundary \
+        if checked_loop is None else np.asarray(checked_loop, np.int64)
     F = np.asarray(F, np.int64)
     # work in units where the mesh spans [-1,1]: the same numbers at any scale (1e-100 or 1e100)
     V, unit = normalise_scale(np.asarray(V, np.float64))
@@ -356,11 +361,11 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     timings['check'] = time.perf_counter() - t0
     report_progress(0.05, 'factorising the Laplacian')
     t = time.perf_counter()
-    system = DiskSystem(V, F, info.boundary, neumann=boundary != 'free', operators=operators)
+    system = DiskSystem(V, F, loop, neumann=boundary != 'free', operators=operators)
     timings['factor'] = time.perf_counter() - t
     report_progress(0.25, 'solving')
     report = {'boundary': boundary, 'vertices': len(V), 'faces': len(F),
-              'boundary_vertices': int(len(info.boundary)), 'operators': system.operators,
+              'boundary_vertices': int(len(loop)), 'operators': system.operators,
               'solver': system._II.backend if system._II is not None else None}
     if degenerate.any():
         report['degenerate_faces'] = int(degenerate.sum())

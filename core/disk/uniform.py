@@ -196,18 +196,22 @@ def _model_lp(s, JF, c, delta, reg_w, active=200, max_rounds=6, max_add=1000, se
         lp.add(s[first], JF[first], side)
     best = (None, None)
     for _ in range(max_rounds):
+        s_r, J_r = s[rows], JF[rows]              # the round's rows, sliced once (not per solve)
+        in_r = {side: inside[side][rows] for side in (1, -1)}
         while True:                               # the exact optimum over ``rows``
             a, _ = lp.solve()
             if a is None:
                 return best
             t1, t0 = lp.bounds
-            m = s[rows] + JF[rows] @ (a - c)
+            m = s_r + J_r @ (a - c)
             added = 0
             for side, viol in ((1, m - t1), (-1, t0 - m)):
-                out = np.nonzero((viol > tol * max(t1 - t0, 1e-12)) & ~inside[side][rows])[0]
-                add = rows[out[np.argsort(-viol[out])[:batch]]]
+                out = np.nonzero((viol > tol * max(t1 - t0, 1e-12)) & ~in_r[side])[0]
+                pick = out[np.argsort(-viol[out])[:batch]]
+                add = rows[pick]
                 inside[side][add] = True
-                lp.add(s[add], JF[add], side)
+                in_r[side][pick] = True
+                lp.add(s_r[pick], J_r[pick], side)
                 added += len(add)
             if not added:
                 break

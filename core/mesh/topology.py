@@ -115,14 +115,20 @@ def connected_components_of(F, n):
     return connected_components(vertex_adjacency(F, n), directed=False)
 
 
+def _sorted_rows_csr(rows, cols, size):
+    """(size,size) CSR 0/1 matrix of the links ``rows`` -> ``cols`` (k,), ``rows`` non-decreasing:
+    built directly (no COO sort), for ``connected_components``, whose labels depend only on the links."""
+    indptr = np.zeros(size + 1, np.int64)
+    np.cumsum(np.bincount(rows, minlength=size), out=indptr[1:])
+    return sp.csr_matrix((np.ones(len(cols)), cols, indptr), shape=(size, size))
+
+
 def face_components(F, n, twin=None):
     """(count, labels (m,)) of triangles connected through shared edges."""
     m = len(F)
     tw = twin_halfedges(F, n) if twin is None else twin
-    t = np.arange(3 * m) // 3
-    ok = tw >= 0
-    A = sp.coo_matrix((np.ones(ok.sum()), (t[ok], tw[ok] // 3)), shape=(m, m))
-    return connected_components(A, directed=False)
+    h = np.flatnonzero(tw >= 0)                      # increasing, so their triangles h // 3 are sorted
+    return connected_components(_sorted_rows_csr(h // 3, tw[h] // 3, m), directed=False)
 
 
 def euler_characteristic(F, n_edges=None):
@@ -139,11 +145,9 @@ def vertex_fans(F, n, twin=None):
     tw = twin_halfedges(F, n) if twin is None else twin
     # corner c = 3t+k sits at F[t,k]; half-edge 3t+k leaves it. Its twin 3t'+k' arrives at the same
     # vertex, which is corner 3t'+(k'+1)%3 of the other triangle.
-    c = np.arange(3 * m)
-    ok = tw >= 0
-    other = (tw[ok] // 3) * 3 + (tw[ok] % 3 + 1) % 3
-    A = sp.coo_matrix((np.ones(ok.sum()), (c[ok], other)), shape=(3 * m, 3 * m))
-    ncomp, lab = connected_components(A, directed=False)
+    c = np.flatnonzero(tw >= 0)
+    other = (tw[c] // 3) * 3 + (tw[c] % 3 + 1) % 3
+    ncomp, lab = connected_components(_sorted_rows_csr(c, other, 3 * m), directed=False)
     # a fan's corners all sit at one vertex (links join corners of the same vertex): count the fans
     # of each vertex through the vertex of each component
     comp_vertex = np.empty(ncomp, np.int64)

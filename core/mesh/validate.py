@@ -12,11 +12,13 @@ DEFAULT_MAX_FACES = 5_000_000
 
 @dataclass
 class MeshInfo:
-    """What ``check_mesh`` found: counts and the boundary loops (each (k,) int64, surface on the left)."""
+    """What ``check_mesh`` found: counts, the boundary loops (each (k,) int64, surface on the left),
+    the Euler characteristic and ``parts``, the number of edge-connected pieces."""
     n_vertices: int
     n_faces: int
     loops: list = field(default_factory=list)
     euler: int = 0
+    parts: int = 1
 
     @property
     def boundary(self):
@@ -160,7 +162,7 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
                              "(separate by loose parts), or flatten the islands one by one", 'bad_topology')
     loops = topology.boundary_loops(F, n, twin)
     chi = topology.euler_characteristic(F, len(E))
-    info = MeshInfo(n_vertices=n, n_faces=m, loops=loops, euler=chi)
+    info = MeshInfo(n_vertices=n, n_faces=m, loops=loops, euler=chi, parts=int(ncomp))
     if kind == 'disk':
         if not loops:
             raise ConformalError("mesh is closed (it has no boundary)", 'no_boundary', 'use_sphere')
