@@ -59,7 +59,11 @@ DEGENERATE_QC = 1e3                # a layout triangle with s1/s2 above this cou
 REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
 QC_WARN = 1.1                      # the layout's qc_mean above this is reported (the discrete
                                    # conformal map of a coarse mesh with strong cones is not exact)
-L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (placement)
+L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (placement, first run)
+WIDE_BOUNDS = (-5.5, 4.8)          # second placement run (MovingCones' cones reach -5.8 .. 4.8 rad;
+                                   # wedges over 2*pi are split by the cut)
+SOFT_FLOORS = (-2.0, -1.0, 0.0)     # raised lower bounds of cones next to a flipped triangle
+MOVE_RADIUS = 3                    # cone moves: each cone tries the vertices within this many edges
 REFACTOR = 0.5                     # Newton: factor the Hessian again when |r| fell by less than this
 CORRECTIONS = 2                    # fixed-point steps of the angles for the exact metric's log scale
 MAX_SPLITS = 10                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
@@ -121,6 +125,7 @@ class ConeSystem:
         self.free = np.nonzero(~fixed)[0]
         self._fac = Factor(self.L[self.free][:, self.free])
         self.eligible = ~bnd
+        self.bounds = L2_BOUNDS        # curvature bounds of l2_angles (set by place_cones)
         self.total = 2 * np.pi * self.chi if self.needs_sum else None
         self._cols = {}
         self.u0 = self.solve(-self.Omega)
@@ -179,7 +184,8 @@ class ConeSystem:
         """Cone curvatures kappa (k,) minimising the area-weighted spread ``sum_i a_i (u_i - c)^2``
         of the log scale over all vertices (``a_i`` a third of the incident triangles' area, ``c``
         free), subject to the sum rule on a closed surface and ``lower <= kappa <= upper``
-        (default ``L2_BOUNDS``); ``shift`` (n,) optional, added to ``u`` (the exact metric's correction,
+        (default ``self.bounds``: ``L2_BOUNDS`` or ``WIDE_BOUNDS``); ``shift`` (n,) optional, added to
+        ``u`` (the exact metric's correction,
         see ``cone_unwrap``): a bounded least-squares problem in k+1 unknowns built from the
         cones' Green's columns. Cheap, and on spot, rocker-arm and cheburashka a better start for the
         per-triangle 1%/99% spread than BFF's rule or the L-inf angles (docs/cones.md)."""
@@ -188,8 +194,8 @@ class ConeSystem:
         k = len(S)
         if k == 0:
             return np.zeros(0)
-        lo = np.maximum(L2_BOUNDS[0] if lower is None else lower, self.kappa_floor[S])
-        hi = np.maximum(L2_BOUNDS[1] if upper is None else upper, lo)
+        lo = np.maximum(self.bounds[0] if lower is None else lower, self.kappa_floor[S])
+        hi = np.maximum(self.bounds[1] if upper is None else upper, lo)
         w = self.vertex_area / self.vertex_area.sum()
         A = np.c_[self.columns(S), -np.ones(self.n)]            # u - c = u0 + A [kappa; c]
         M = A.T @ (w[:, None] * A)
@@ -378,7 +384,112 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
     return S, history
 
 
-def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None, candidates=None):
+def _batch_spread(F, A, U, q=1.0):
+    """Area-weighted q%/(100-q)% spread of the per-triangle scale for each column of ``U`` (n,c):
+    ``face_spread`` of every column at once. Returns (c,)."""
+    uf = U[F].mean(1)                                           # (m,c)
+    order = np.argsort(uf, axis=0)
+    c = np.cumsum(A[order], axis=0)
+    c /= c[-1]
+    cols = np.arange(U.shape[1])
+    lo = uf[order[(c < q / 100).sum(0).clip(0, len(A) - 1), cols], cols]
+    hi = uf[order[(c < 1 - q / 100).sum(0).clip(0, len(A) - 1), cols], cols]
+    return np.exp(lo - hi)
+
+
+def _screen_moves(system, S, kap, i, cand):
+    """Approximate spread (c,) of moving cone ``S[i]`` to each vertex of ``cand`` (c,): the area-L2
+    angles re-solved in one batch with the cones now at a bound held there (the active set of the
+    current angles ``kap``) and the moved cone's angle then clipped to its bounds; one KKT system
+    of size about k per candidate (``np.linalg.solve`` on the stack). ``_score`` checks the best."""
+    n = system.n
+    w = system.vertex_area / system.vertex_area.sum()
+    others = np.array(S[:i] + S[i + 1:], np.int64)
+    ko = np.delete(np.asarray(kap, np.float64), i)
+    blo, bhi = system.bounds
+    lo_o = np.maximum(blo, system.kappa_floor[others])
+    at_bound = (np.abs(ko - lo_o) < 1e-7) | (np.abs(ko - bhi) < 1e-7)
+    Go = system.columns(others) if len(others) else np.zeros((n, 0))
+    r0 = system.u0 + Go[:, at_bound] @ ko[at_bound]
+    P = np.c_[Go[:, ~at_bound], -np.ones(n)]                    # (n, f+1): free angles, the constant
+    B = np.zeros((n, len(cand)))
+    B[cand, np.arange(len(cand))] = 1.0
+    Gc = system.solve(B)                                        # (n,c) the candidates' columns
+    f1 = P.shape[1]
+    WP = w[:, None] * P
+    PtWP = P.T @ WP
+    PtWG = WP.T @ Gc                                            # (f+1, c)
+    gWg = np.einsum('ic,ic->c', Gc, w[:, None] * Gc)
+    PtWr = WP.T @ r0
+    gWr = Gc.T @ (w * r0)
+    c = len(cand)
+    size = f1 + 1 + (1 if system.needs_sum else 0)
+    K = np.zeros((c, size, size))
+    K[:, :f1, :f1] = PtWP
+    K[:, :f1, f1] = PtWG.T
+    K[:, f1, :f1] = PtWG.T
+    K[:, f1, f1] = gWg
+    rhs = np.zeros((c, size))
+    rhs[:, :f1] = -PtWr
+    rhs[:, f1] = -gWr
+    if system.needs_sum:
+        e = np.r_[np.ones(f1 - 1), 0.0, 1.0]
+        K[:, :f1 + 1, -1] = e
+        K[:, -1, :f1 + 1] = e
+        rhs[:, -1] = system.total - ko[at_bound].sum()
+    K[:, np.arange(size), np.arange(size)] += 1e-12 * np.abs(K).max()
+    try:
+        x = np.linalg.solve(K, rhs[..., None])[..., 0]          # (c, size)
+    except np.linalg.LinAlgError:
+        return np.zeros(c)
+    kv = np.clip(x[:, f1], np.maximum(blo, system.kappa_floor[cand]), bhi)
+    kf = np.clip(x[:, :f1 - 1], lo_o[~at_bound], bhi)
+    U = r0[:, None] + Go[:, ~at_bound] @ kf.T + Gc * kv
+    return _batch_spread(system.F, system.A, U)
+
+
+def move_cones(system, S, kap, best, radius=3, sweeps=2, verify=3, far=0, report=None):
+    """Local search over the ``radius``-ring of each cone (MovingCones-style moves, scored by the
+    area-weighted 1%/99% spread of the per-triangle scale with the area-L2 angles re-solved):
+    for each cone in turn, every eligible vertex within ``radius`` edges (not next to another cone)
+    is screened at once (``_screen_moves``), the ``verify`` best are scored exactly (``_score``) and
+    the cone moves to the best one if it beats ``best``. ``S`` list of cone ids, ``kap`` (k,) their
+    angles, ``best`` their spread. Returns (S, kap, best, moves made)."""
+    S = list(S)
+    moves = 0
+    for sweep in range(sweeps):
+        moved = False
+        for i in range(len(S)):
+            if report:
+                report(sweep / sweeps + i / len(S) / sweeps, "moving cones")
+            others = S[:i] + S[i + 1:]
+            blocked = system.rings(others, 1) if others else np.zeros(system.n, bool)
+            near = system.rings([S[i]], radius)
+            near[S[i]] = False
+            ok = system.eligible & ~blocked
+            cand = np.nonzero(near & ok)[0]
+            if far and others:
+                # the most extreme vertices of u without this cone: where it may be needed more
+                u = system.u_of(others, system.l2_angles(others))
+                idx = np.nonzero(ok & ~near)[0]
+                order = idx[np.argsort(u[idx])]
+                cand = np.unique(np.r_[cand, order[:far // 2], order[-(far // 2):]])
+            if not len(cand):
+                continue
+            approx = _screen_moves(system, S, kap, i, cand)
+            for j in np.argsort(-approx)[:verify]:
+                T = S[:i] + [int(cand[j])] + S[i + 1:]
+                sc, kk = _score(system, T)
+                if sc > best + 1e-9:
+                    best, kap, S, moved = sc, kk, T, True
+                    moves += 1
+        if not moved:
+            break
+    return S, kap, best, moves
+
+
+def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None, candidates=None,
+                bounds=None):
     """Cone placement: two greedy runs, the better one refined by local moves (docs/cones.md,
     "Placement").
 
@@ -398,35 +509,34 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
     report = progress or (lambda f, msg: None)
     if candidates is None:
         candidates = 12 if system.n <= BIG_MESH else 0
-    runs = []
-    for c in sorted({candidates, 0}, reverse=True):
-        S, hist = _greedy(system, target_ratio, max_cones, c, report)
-        sc = _score(system, S)[0] if S else hist[-1][1]
-        hit = target_ratio is not None and sc >= target_ratio
-        runs.append(((hit, -len(S) if hit else 0, sc), S, hist))
-    _, S, history = max(runs, key=lambda r: r[0])
-    if not S:
-        return np.zeros(0, np.int64), np.zeros(0), history
-    best, kap = _score(system, S)
-    adj = topology.vertex_adjacency(system.F, system.n).tocsr()
-    for sweep in range(sweeps):
-        report(0.7 + 0.2 * sweep / max(1, sweeps), "moving cones")
-        moved = False
-        for i in range(len(S)):
-            others = S[:i] + S[i + 1:]
-            blocked = system.rings(others, 1) if others else np.zeros(system.n, bool)
-            nb = adj[S[i]].indices
-            nb = nb[system.eligible[nb] & ~blocked[nb]]
-            system.columns(nb)
-            for v in nb.tolist():
-                T = S[:i] + [v] + S[i + 1:]
-                sc, kk = _score(system, T)
-                if sc > best + 1e-9:
-                    best, kap, S, moved = sc, kk, T, True
-        history.append((len(S), best))
-        if not moved:
-            break
-    return np.array(S, np.int64), np.asarray(kap, np.float64), history
+    if bounds is None:
+        bounds = (L2_BOUNDS, WIDE_BOUNDS) if system.n <= BIG_MESH else (L2_BOUNDS,)
+    results = []
+    for b, lim in enumerate(bounds):
+        system.bounds = lim
+        sub = lambda f, msg, b=b: report((b + f) / len(bounds), msg)     # noqa: E731
+        runs = []
+        for c in sorted({candidates, 0}, reverse=True):
+            S, hist = _greedy(system, target_ratio, max_cones, c, sub)
+            sc = _score(system, S)[0] if S else hist[-1][1]
+            hit = target_ratio is not None and sc >= target_ratio
+            runs.append(((hit, -len(S) if hit else 0, sc), S, hist))
+        _, S, history = max(runs, key=lambda r: r[0])
+        if not S:
+            return np.zeros(0, np.int64), np.zeros(0), history
+        best, kap = _score(system, S)
+        if sweeps:
+            S, kap, best, _ = move_cones(system, S, kap, best, radius=MOVE_RADIUS, sweeps=sweeps,
+                                         report=lambda f, msg, sub=sub: sub(0.7 + 0.25 * f, msg))
+            history.append((len(S), best))
+        hit = target_ratio is not None and best >= target_ratio
+        results.append(((hit, -len(S) if hit else 0, best), np.array(S, np.int64),
+                        np.asarray(kap, np.float64), history, lim))
+    results.sort(key=lambda r: r[0], reverse=True)
+    _, S, kap, history, lim = results[0]
+    system.bounds = lim
+    system.alternates = [(r[1], r[2], r[4]) for r in results[1:]]
+    return S, kap, history
 
 
 # ------------------------------------------------------------------------------------------------
@@ -1129,74 +1239,118 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     if system.needs_sum and genus == 0 and len(S) < 2:
         raise ConformalError("a closed genus-0 surface needs at least 3 cones (each below 2*pi, summing "
                              "to 4*pi)")
-    report_progress(0.7, 'cutting')
-    t = time.perf_counter()
-    seams0 = cut_graph(Vw, Fw, S)
-    timings['cut'] = time.perf_counter() - t
-    report_progress(0.75, 'laying out the cut disk')
-    t = time.perf_counter()
     given = isinstance(cones, tuple) and len(cones) == 2
-    deg = np.bincount(seams0.ravel(), minlength=n)
 
-    def candidates():
-        """Angle sets to lay out: the placement's, L-inf angles with floors, BFF's (lazily)."""
-        if given or not len(S) or n <= BIG_MESH:
-            yield ('given' if given else 'placement'), kappa
-        if given or not len(S):
-            return
-        # the cut is fixed by the cones; a leaf of it is one wedge, so its kappa must be positive
-        leaf = deg[S] <= 1
-        if leaf.any():
-            yield 'l2, leaves >= 0.4', system.l2_angles(S, lower=np.where(leaf, KAPPA_LEAF, L2_BOUNDS[0]))
-        for floor in ANGLE_FLOORS:
-            k2, _ = system.trimmed_angles(S, lower=np.where(leaf, KAPPA_LEAF, max(floor, KAPPA_MIN)),
-                                          rounds=3 if n <= BIG_MESH else 1)
-            if k2 is not None:
-                yield f'linf, kappa >= {floor}', k2
-        if n <= BIG_MESH:
-            yield 'bff', system.dirichlet_angles(S)
+    def lay_out(S, kappa):
+        """Cut the mesh through the cones ``S`` and lay out the angle candidates on that cut
+        (the placement's ``kappa`` first). Returns (best (key, label, kappa, evaluation) or None,
+        list of what was tried)."""
+        report_progress(0.7, 'cutting')
+        t = time.perf_counter()
+        seams0 = cut_graph(Vw, Fw, S)
+        timings['cut'] = timings.get('cut', 0.0) + time.perf_counter() - t
+        report_progress(0.75, 'laying out the cut disk')
+        t = time.perf_counter()
+        deg = np.bincount(seams0.ravel(), minlength=n)
 
-    cands = candidates()
-    best = None
-    tried = []
-    cache = {}
-    def corrected():
-        """Angle sets that account for the exact metric: the realised log scale differs from the
-        linear one by ``d = u_exact - u_linear``, nearly independent of small angle changes; the area-L2
-        angles are re-solved for ``u_linear + d`` (a fixed-point step), from the best layout so far."""
-        for it in range(CORRECTIONS if n <= BIG_MESH and not given and len(S) else 0):
-            if best is None or 'u_exact' not in best[3]['info']:
+        def candidates():
+            """Angle sets to lay out: the placement's, L-inf angles with floors, BFF's (lazily)."""
+            if given or not len(S) or n <= BIG_MESH:
+                yield ('given' if given else 'placement'), kappa
+            if given or not len(S):
                 return
-            ue = best[3]['info']['u_exact']
-            d = ue - system.u_of(S, best[2])
-            yield f'l2, exact-metric correction {it + 1}', system.l2_angles(S, shift=d - np.median(d))
+            # the cut is fixed by the cones; a leaf of it is one wedge, so its kappa must be positive
+            leaf = deg[S] <= 1
+            if leaf.any():
+                low = np.where(leaf, KAPPA_LEAF, system.bounds[0])
+                yield 'l2, leaves >= 0.4', system.l2_angles(S, lower=low)
+            for floor in ANGLE_FLOORS:
+                k2, _ = system.trimmed_angles(S, lower=np.where(leaf, KAPPA_LEAF, max(floor, KAPPA_MIN)),
+                                              rounds=3 if n <= BIG_MESH else 1)
+                if k2 is not None:
+                    yield f'linf, kappa >= {floor}', k2
+            if n <= BIG_MESH:
+                yield 'bff', system.dirichlet_angles(S)
 
-    import itertools
-    for label, kap in itertools.chain(cands, corrected()):
-        if best is not None and best[0][0] and n > BIG_MESH:
-            break                                   # big mesh: the first valid layout is kept
-        try:
-            ev = _evaluate(Vw, Fw, system, S, kap, seams0, cache)
-        except ConformalError as exc:
-            tried.append({'angles': label, 'error': exc.problem})
-            continue
-        me = ev['measured']
-        tried.append({'angles': label, 'flips': me['flips'], 'overlaps': ev['crossings'],
-                      'degenerate': me['degenerate'], 'mu_ratio_p1_p99': me['mu_ratio_p1_p99'],
-                      'mu_ratio_p1_p99_area': me['mu_ratio_p1_p99_area'],
-                      'qc_mean': me['qc_mean'], 'exact': ev['info']['exact'],
-                      'charts': ev['info']['charts']})
-        defects = me['flips'] + ev['crossings'] + me['degenerate']
-        key = (defects == 0, -defects, me['mu_ratio_p1_p99_area'])
-        if best is None or key > best[0]:
-            best = (key, label, kap, ev)
+        cands = candidates()
+        best = None
+        tried = []
+        cache = {}
+        def corrected():
+            """Angle sets that account for the exact metric: the realised log scale differs from the
+            linear one by ``d = u_exact - u_linear``, nearly independent of small angle changes; the area-L2
+            angles are re-solved for ``u_linear + d`` (a fixed-point step), from the best layout so far."""
+            for it in range(CORRECTIONS if n <= BIG_MESH and not given and len(S) else 0):
+                if best is None or 'u_exact' not in best[3]['info']:
+                    return
+                ue = best[3]['info']['u_exact']
+                d = ue - system.u_of(S, best[2])
+                yield f'l2, exact-metric correction {it + 1}', system.l2_angles(S, shift=d - np.median(d))
+
+        last = {}
+
+        def softened():
+            """Angle sets for a layout that still flips: a cone with a flipped triangle within one ring
+            (a strong negative cone whose exact metric degenerates a neighbour) gets a higher lower
+            bound (``SOFT_FLOORS``, raised again if it still flips) and the area-L2 angles are
+            re-solved; up to ``len(SOFT_FLOORS) + 1`` rounds."""
+            floors = {}
+            for _ in range(len(SOFT_FLOORS) + 1 if not given and len(S) and n <= BIG_MESH else 0):
+                if best is None or best[0][0] or 'ev' not in last:
+                    return
+                near = _cones_near_flips(system, Fw, last['ev'], S)
+                if not near.any():
+                    return
+                for i in np.nonzero(near)[0].tolist():
+                    floors[i] = SOFT_FLOORS[min(SOFT_FLOORS.index(floors[i]) + 1, len(SOFT_FLOORS) - 1)
+                                            if i in floors else 0]
+                low = np.full(len(S), system.bounds[0])
+                low[list(floors)] = list(floors.values())
+                yield (f"l2, {len(floors)} cone(s) next to flips >= {max(floors.values())}",
+                       system.l2_angles(S, lower=low))
+
+        import itertools
+        for label, kap in itertools.chain(cands, corrected(), softened()):
+            if best is not None and best[0][0] and n > BIG_MESH:
+                break                                   # big mesh: the first valid layout is kept
+            try:
+                ev = _evaluate(Vw, Fw, system, S, kap, seams0, cache)
+            except ConformalError as exc:
+                tried.append({'angles': label, 'error': exc.problem})
+                continue
+            last['ev'] = ev
+            me = ev['measured']
+            tried.append({'angles': label, 'flips': me['flips'], 'overlaps': ev['crossings'],
+                          'degenerate': me['degenerate'], 'mu_ratio_p1_p99': me['mu_ratio_p1_p99'],
+                          'mu_ratio_p1_p99_area': me['mu_ratio_p1_p99_area'],
+                          'qc_mean': me['qc_mean'], 'exact': ev['info']['exact'],
+                          'charts': ev['info']['charts']})
+            defects = me['flips'] + ev['crossings'] + me['degenerate']
+            key = (defects == 0, -defects, me['mu_ratio_p1_p99_area'])
+            if best is None or key > best[0]:
+                best = (key, label, kap, ev)
+        return best, tried
+
+    t_lay = time.perf_counter()
+    best, tried = lay_out(S, kappa)
+    if cones is None and n <= BIG_MESH and (best is None or not best[0][0]):
+        # the placement with the other curvature bounds, when the best one has no clean layout
+        for S2, k2, bounds in getattr(system, 'alternates', []):
+            system.bounds = bounds
+            S2, k2 = _drop_weak(system, S2, k2)
+            best2, tried2 = lay_out(S2, k2)
+            tried += [dict(c, angles=f"{c['angles']} (bounds {bounds})") for c in tried2]
+            if best2 is not None and (best is None or best2[0] > best[0]):
+                best, S = best2, S2
+            if best[0][0]:
+                break
+    timings['layout'] = time.perf_counter() - t_lay - timings['cut']
     if best is None:
         raise ConformalError(f"no layout of the cut disk could be built: {tried[0]['error']}",
                              'solve_failed')
     _, angles_used, kappa, ev = best
     cut, uvc, seams, linfo = ev['cut'], ev['uv'], ev['seams'], ev['info']
     measured, crossings, u = ev['measured'], ev['crossings'], ev['u']
-    timings['layout'] = time.perf_counter() - t
     t = time.perf_counter()
     E, _ = topology.unique_edges(Fw)
     total_len = float(np.linalg.norm(Vw[E[:, 0]] - Vw[E[:, 1]], axis=1).sum())
@@ -1245,6 +1399,17 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     u_in[orig] = u                                          # (a split vertex: its last copy)
     report_progress(1.0, 'done')
     return ConeResult(uv=uv, seams=seams_in, cones=orig[S], kappa=kappa, u=u_in, report=rep)
+
+
+def _cones_near_flips(system, Fw, ev, S):
+    """(k,) bool: the cones ``S`` within one ring of a triangle that the layout ``ev`` (``_evaluate``)
+    flips (the cut disk's faces keep the order of ``Fw`` (m,3))."""
+    W = ev['uv'][ev['cut'].F]
+    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+    bad = np.nonzero(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0)[0]
+    if not len(bad):
+        return np.zeros(len(S), bool)
+    return system.rings(np.unique(Fw[bad]), 1)[S]
 
 
 def _drop_weak(system, S, kappa, tol=0.02):
