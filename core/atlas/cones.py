@@ -412,9 +412,7 @@ def _screen_moves(system, S, kap, i, cand):
     Go = system.columns(others) if len(others) else np.zeros((n, 0))
     r0 = system.u0 + Go[:, at_bound] @ ko[at_bound]
     P = np.c_[Go[:, ~at_bound], -np.ones(n)]                    # (n, f+1): free angles, the constant
-    B = np.zeros((n, len(cand)))
-    B[cand, np.arange(len(cand))] = 1.0
-    Gc = system.solve(B)                                        # (n,c) the candidates' columns
+    Gc = system.columns(cand)                                   # (n,c) the candidates' columns (cached)
     f1 = P.shape[1]
     WP = w[:, None] * P
     PtWP = P.T @ WP
