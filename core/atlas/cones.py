@@ -63,6 +63,7 @@ L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (pla
 WIDE_BOUNDS = (-5.5, 4.8)          # second placement run (MovingCones' cones reach -5.8 .. 4.8 rad;
                                    # wedges over 2*pi are split by the cut)
 SOFT_FLOORS = (-2.0, -1.0, 0.0)     # raised lower bounds of cones next to a flipped triangle
+VERIFY = 3                         # screened candidates (moves, greedy look-ahead) scored exactly
 MOVE_RADIUS = 3                    # cone moves: each cone tries the vertices within this many edges
 REFACTOR = 0.5                     # Newton: factor the Hessian again when |r| fell by less than this
 CORRECTIONS = 2                    # fixed-point steps of the angles for the exact metric's log scale
@@ -353,6 +354,7 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
     best = history[-1][1]
     min_cones = 3 if system.needs_sum and system.chi > 0 else 0
     half = max(1, candidates // 2)
+    kap = np.zeros(0)
     while len(S) < max_cones:
         if target_ratio is not None and best >= target_ratio and len(S) >= min_cones:
             break
@@ -366,9 +368,10 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
         if candidates:
             order = idx[np.argsort(u[idx] - (w * u).sum())]
             cand = np.unique(np.r_[order[:half], order[-half:]])
-            system.columns(cand)
+            # screened in one batch (``_screen``), the best few scored exactly
+            approx = _screen(system, S, kap, cand)
             trial = None
-            for v in cand.tolist():
+            for v in cand[np.argsort(-approx)[:VERIFY]].tolist():
                 sc, kk = _score(system, S + [v])
                 if trial is None or sc > trial[0]:
                     trial = (sc, v, kk)
@@ -398,14 +401,21 @@ def _batch_spread(F, A, U, q=1.0):
 
 
 def _screen_moves(system, S, kap, i, cand):
-    """Approximate spread (c,) of moving cone ``S[i]`` to each vertex of ``cand`` (c,): the area-L2
-    angles re-solved in one batch with the cones now at a bound held there (the active set of the
-    current angles ``kap``) and the moved cone's angle then clipped to its bounds; one KKT system
-    of size about k per candidate (``np.linalg.solve`` on the stack). ``_score`` checks the best."""
+    """Approximate spread (c,) of moving cone ``S[i]`` to each vertex of ``cand`` (c,) (``_screen``
+    with the other cones and their angles)."""
+    return _screen(system, S[:i] + S[i + 1:], np.delete(np.asarray(kap, np.float64), i), cand)
+
+
+def _screen(system, others, ko, cand):
+    """Approximate spread (c,) of adding a cone at each vertex of ``cand`` (c,) to the cones
+    ``others`` (list) with angles ``ko`` (k,): the area-L2 angles re-solved in one batch with the
+    cones now at a bound held there (the active set of ``ko``) and the new cone's angle then clipped
+    to its bounds; one KKT system of size about k per candidate (``np.linalg.solve`` on the stack).
+    Exact when no bound is active. ``_score`` checks the best few."""
     n = system.n
     w = system.vertex_area / system.vertex_area.sum()
-    others = np.array(S[:i] + S[i + 1:], np.int64)
-    ko = np.delete(np.asarray(kap, np.float64), i)
+    others = np.asarray(others, np.int64)
+    ko = np.asarray(ko, np.float64)
     blo, bhi = system.bounds
     lo_o = np.maximum(blo, system.kappa_floor[others])
     at_bound = (np.abs(ko - lo_o) < 1e-7) | (np.abs(ko - bhi) < 1e-7)
@@ -446,7 +456,7 @@ def _screen_moves(system, S, kap, i, cand):
     return _batch_spread(system.F, system.A, U)
 
 
-def move_cones(system, S, kap, best, radius=3, sweeps=2, verify=3, far=0, report=None):
+def move_cones(system, S, kap, best, radius=3, sweeps=2, verify=None, far=0, report=None):
     """Local search over the ``radius``-ring of each cone (MovingCones-style moves, scored by the
     area-weighted 1%/99% spread of the per-triangle scale with the area-L2 angles re-solved):
     for each cone in turn, every eligible vertex within ``radius`` edges (not next to another cone)
@@ -455,6 +465,7 @@ def move_cones(system, S, kap, best, radius=3, sweeps=2, verify=3, far=0, report
     angles, ``best`` their spread. Returns (S, kap, best, moves made)."""
     S = list(S)
     moves = 0
+    verify = VERIFY if verify is None else verify
     for sweep in range(sweeps):
         moved = False
         for i in range(len(S)):
