@@ -520,31 +520,38 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
         candidates = 12 if system.n <= BIG_MESH else 0
     if bounds is None:
         bounds = (L2_BOUNDS, WIDE_BOUNDS) if system.n <= BIG_MESH else (L2_BOUNDS,)
+    # greedy runs under each bound set; cone moves on every run with a fixed budget (target None),
+    # on the best run only in the automatic mode (its time matters more: up to max_cones cones)
     results = []
+    total = len(bounds) + (len(bounds) if target_ratio is None else 1)
     for b, lim in enumerate(bounds):
         system.bounds = lim
-        sub = lambda f, msg, b=b: report((b + f) / len(bounds), msg)     # noqa: E731
         runs = []
         for c in sorted({candidates, 0}, reverse=True):
-            S, hist = _greedy(system, target_ratio, max_cones, c, sub)
+            S, hist = _greedy(system, target_ratio, max_cones, c,
+                              lambda f, msg, b=b: report((b + f) / total, msg))
             sc = _score(system, S)[0] if S else hist[-1][1]
             hit = target_ratio is not None and sc >= target_ratio
             runs.append(((hit, -len(S) if hit else 0, sc), S, hist))
-        _, S, history = max(runs, key=lambda r: r[0])
+        key, S, history = max(runs, key=lambda r: r[0])
         if not S:
             return np.zeros(0, np.int64), np.zeros(0), history
-        best, kap = _score(system, S)
-        if sweeps:
-            S, kap, best, _ = move_cones(system, S, kap, best, radius=MOVE_RADIUS, sweeps=sweeps,
-                                         report=lambda f, msg, sub=sub: sub(0.7 + 0.25 * f, msg))
-            history.append((len(S), best))
-        hit = target_ratio is not None and best >= target_ratio
-        results.append(((hit, -len(S) if hit else 0, best), np.array(S, np.int64),
-                        np.asarray(kap, np.float64), history, lim))
+        results.append([key, list(S), _score(system, S)[1], history, lim])
     results.sort(key=lambda r: r[0], reverse=True)
-    _, S, kap, history, lim = results[0]
+    for b, r in enumerate(results[:len(results) if target_ratio is None else 1]):
+        if not sweeps:
+            break
+        system.bounds = r[4]
+        S, kap, best, _ = move_cones(system, r[1], r[2], r[0][2], radius=MOVE_RADIUS, sweeps=sweeps,
+                                     report=lambda f, msg, b=b: report((len(bounds) + b + f) / total, msg))
+        r[3] = r[3] + [(len(S), best)]
+        hit = target_ratio is not None and best >= target_ratio
+        r[:3] = [(hit, -len(S) if hit else 0, best), S, kap]
+    results.sort(key=lambda r: r[0], reverse=True)
+    key, S, kap, history, lim = results[0]
     system.bounds = lim
-    system.alternates = [(r[1], r[2], r[4]) for r in results[1:]]
+    system.alternates = [(np.array(r[1], np.int64), np.asarray(r[2], np.float64), r[4]) for r in results[1:]]
+    S, kap = np.array(S, np.int64), np.asarray(kap, np.float64)
     return S, kap, history
 
 
