@@ -1056,9 +1056,13 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
     measured['mu_ratio_p1_p99_area'] = weighted_spread(mu, A)
     sv = singular_values(J)
     # a triangle squashed to (nearly) nothing is as unusable as a flipped one
-    measured['degenerate'] = int((sv[:, 1] <= DEGENERATE_QC ** -1 * sv[:, 0]).sum())
+    squashed = sv[:, 1] <= DEGENERATE_QC ** -1 * sv[:, 0]
+    measured['degenerate'] = int(squashed.sum())
+    W = uvc[Fc]
+    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+    bad = np.nonzero(squashed | (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0))[0]
     return {'cut': cut, 'loop': loop, 'uv': uvc, 'seams': seams, 'info': info, 'measured': measured,
-            'crossings': crossings, 'u': u}
+            'crossings': crossings, 'u': u, 'bad': bad}
 
 
 def _piece_crossings(Fc, uvc, face_island, n_islands, segments=False):
@@ -1304,6 +1308,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                 yield f'l2, exact-metric correction {it + 1}', system.l2_angles(S, shift=d - np.median(d))
 
         last = {}
+        dirty = []                       # (ratio, evaluation) of the best layout with defects
 
         def softened():
             """Angle sets for a layout that still flips: a cone with a flipped triangle within one ring
@@ -1311,10 +1316,12 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
             bound (``SOFT_FLOORS``, raised again if it still flips) and the area-L2 angles are
             re-solved; up to ``len(SOFT_FLOORS) + 1`` rounds."""
             floors = {}
+            ev = dirty[1] if dirty else None
             for _ in range(len(SOFT_FLOORS) + 1 if not given and len(S) and n <= BIG_MESH else 0):
-                if best is None or best[0][0] or 'ev' not in last:
+                # while the best layout is not clean, or a defective one had the better ratio
+                if ev is None or (best[0][0] and best[0][2] >= dirty[0]):
                     return
-                near = _cones_near_flips(system, Fw, last['ev'], S)
+                near = _cones_near_flips(system, Fw, ev, S)
                 if not near.any():
                     return
                 for i in np.nonzero(near)[0].tolist():
@@ -1324,6 +1331,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                 low[list(floors)] = list(floors.values())
                 yield (f"l2, {len(floors)} cone(s) next to flips >= {max(floors.values())}",
                        system.l2_angles(S, lower=low))
+                ev = last['ev'] if last.get('ev') is not None and len(last['ev']['bad']) else None
 
         import itertools
         for label, kap in itertools.chain(cands, corrected(), softened()):
@@ -1343,6 +1351,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                           'charts': ev['info']['charts']})
             defects = me['flips'] + ev['crossings'] + me['degenerate']
             key = (defects == 0, -defects, me['mu_ratio_p1_p99_area'])
+            if defects and len(ev['bad']) and (not dirty or key[2] > dirty[0]):
+                dirty[:] = [key[2], ev]
             if best is None or key > best[0]:
                 best = (key, label, kap, ev)
         return best, tried
@@ -1419,10 +1429,13 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
 
 def _cones_near_flips(system, Fw, ev, S):
     """(k,) bool: the cones ``S`` within one ring of a triangle that the layout ``ev`` (``_evaluate``)
-    flips (the cut disk's faces keep the order of ``Fw`` (m,3))."""
-    W = ev['uv'][ev['cut'].F]
-    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
-    bad = np.nonzero(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0)[0]
+    flips or squashes (``ev['bad']``; else the flips of ``ev['uv']`` on ``ev['cut'].F``, whose faces
+    keep the order of ``Fw`` (m,3))."""
+    bad = ev.get('bad')
+    if bad is None:
+        W = ev['uv'][ev['cut'].F]
+        e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+        bad = np.nonzero(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0)[0]
     if not len(bad):
         return np.zeros(len(S), bool)
     return system.rings(np.unique(Fw[bad]), 1)[S]
