@@ -12,10 +12,11 @@ columns of the cones are ever computed (one solve each with the one factorisatio
 
 Pipeline of ``cone_unwrap``:
 
-1. placement (``place_cones``): a look-ahead greedy (the most extreme vertices of ``u`` tried, each
-   scored by the area-weighted 1%/99% spread of the per-triangle scale with bounded area-L2 angles,
-   ``ConeSystem.l2_angles``) and BFF's greedy; the better run, then local moves of each cone to its
-   one-ring. ``L`` is the intrinsic Delaunay Laplacian.
+1. placement (``place_cones``): a look-ahead greedy (the most extreme vertices of ``u`` screened in
+   one batch, the best scored by the area-weighted 1%/99% spread of the per-triangle scale with
+   bounded area-L2 angles, ``ConeSystem.l2_angles``) and BFF's greedy, each under two sets of
+   curvature bounds (``L2_BOUNDS``, ``WIDE_BOUNDS``); then cone moves over 3-rings (``move_cones``).
+   ``L`` is the intrinsic Delaunay Laplacian.
 2. cut graph (``core.atlas.cutgraph.cut_graph``): 2g homology loops plus a short tree through the
    cones and the boundary, pruned and straightened. A wedge over ``2*pi`` (a negative cone) gets a
    new branch through its middle (``through_corner``).
@@ -499,22 +500,28 @@ def move_cones(system, S, kap, best, radius=3, sweeps=2, verify=None, far=0, rep
 
 def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None, candidates=None,
                 bounds=None):
-    """Cone placement: two greedy runs, the better one refined by local moves (docs/cones.md,
-    "Placement").
+    """Cone placement: greedy runs under each set of curvature bounds, refined by cone moves over
+    k-rings (docs/cones.md, "Placement").
 
     1. Greedy with a look-ahead: ``candidates`` vertices are tried for the next cone, the most
        extreme of ``u`` at each end (half the highest, half the lowest, outside the cones'
-       one-rings); each is scored by the area-weighted 1%/99% spread of the per-triangle scale
-       (``face_spread``) with the angles re-solved (``l2_angles``), and the best is kept. One Green's
-       column per candidate (cached). And BFF's greedy (the vertex of largest ``|u - u_cone|``; it
-       finds the exact corners of a cube). Each stops when the spread reaches ``target_ratio`` (None:
-       never) or at ``max_cones``; the run that reaches the target with fewer cones, else the better
-       spread (``_score``), is kept.
-    2. ``sweeps`` passes of local moves: each cone tries the vertices of its one-ring and moves where
-       the spread improves (angles re-solved).
-    ``system``: ``ConeSystem``. ``candidates``: per greedy step (default 12; on meshes over
-    ``BIG_MESH`` vertices only BFF's greedy runs). Returns (cones (c,), kappa (c,), history list of
-    (count, spread))."""
+       one-rings); they are screened in one batch (``_screen``) and the best ``VERIFY`` scored by the
+       area-weighted 1%/99% spread of the per-triangle scale (``face_spread``) with the angles
+       re-solved (``l2_angles``); the best is kept. And BFF's greedy (the vertex of largest
+       ``|u - u_cone|``; it finds the exact corners of a cube). Each stops when the spread reaches
+       ``target_ratio`` (None: never) or at ``max_cones``; the run that reaches the target with fewer
+       cones, else the better spread (``_score``), is kept.
+    2. Both greedy runs under each of ``bounds`` (default ``(L2_BOUNDS, WIDE_BOUNDS)``: the area-L2
+       angles' curvature range; neither range wins on every mesh, so both are tried).
+    3. ``sweeps`` passes of cone moves (``move_cones``, ``MOVE_RADIUS``-rings): on every bound set's
+       result with a fixed budget (``target_ratio`` None), on the better one only otherwise (time).
+    Why the area-L2 angles score the placement and not L-inf or trimmed L-inf ones: on a fixed cone
+    set the area-L2 angles are within 0.01 of a direct optimisation of the 1%/99% spread, the L-inf
+    ones far below it (docs/cones.md); the gap to MovingCones is where the cones are.
+    ``system``: ``ConeSystem``; its ``bounds`` is left at the kept run's and ``alternates`` lists the
+    other runs' (cones, kappa, bounds), the fallback of ``cone_unwrap``. ``candidates``: per greedy
+    step (default 12; on meshes over ``BIG_MESH`` vertices only BFF's greedy runs, under
+    ``L2_BOUNDS``, without moves). Returns (cones (c,), kappa (c,), history list of (count, spread))."""
     report = progress or (lambda f, msg: None)
     if candidates is None:
         candidates = 12 if system.n <= BIG_MESH else 0
