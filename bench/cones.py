@@ -1,7 +1,7 @@
 """Cones and seams for the L-inf objective (issue 13): the Pareto table and the anchors.
 
     .venv/bin/python bench/cones.py [--meshes spot cheburashka cow rocker-arm] [--budgets 4 8 12 16 24]
-                                    [--no-anchor] [--no-xatlas] [--no-auto] [--big]
+                                    [--no-anchor] [--no-xatlas] [--no-auto] [--big] [--acceptance]
 
 Rows per mesh: ``cone_unwrap`` with exactly N cones (``target_ratio=None, max_cones=N``) and 'auto'
 (``target_ratio=0.5``); the BFF-style greedy anchor (a cone at the vertex of largest |u| with u equal
@@ -13,6 +13,9 @@ counts boundary self-crossings of the cut disk (0 with 0 flips: no overlap). 'se
 length as a fraction of the total edge length. Published MovingCones p1/p99 (vertex level) for
 comparison: spot 16 cones 0.367, 41 cones 0.615; cheburashka 24 cones 0.383, 53 cones 0.604;
 rocker-arm 8 cones 0.420, 18 cones 0.617.
+
+``--acceptance``: only the MovingCones rows (spot 16 and 41 cones, cheburashka 24 and 53, rocker-arm 8
+and 18), placed and laid out by ``cone_unwrap``, beside the published figure.
 
 ``--big``: the speed target, auto cones plus flattening on ~100k-triangle meshes (spot subdivided
 twice; a blob), with time and peak memory. Meshes are read from ``meshes.corpus_dir()`` (outside the
@@ -126,7 +129,8 @@ def row(res, t):
     return r
 
 
-def table(names, budgets, anchor, use_xatlas, auto=True):
+def table(names, budgets, anchor, use_xatlas, auto=True, per_mesh=None):
+    """Print the Pareto table; ``per_mesh`` (dict name -> budgets) overrides ``budgets``."""
     print('| mesh | method | cones | charts | seam | mu_ratio | p1/p99 (area) | p1/p99 (count) | p1/p99 of u '
           '| qc_mean | flips | cross | s | MovingCones p1/p99 |')
     print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
@@ -136,7 +140,7 @@ def table(names, budgets, anchor, use_xatlas, auto=True):
             continue
         V, F = got
         ref = MOVING_CONES.get(name, {})
-        for N in list(budgets) + (['auto'] if auto else []):
+        for N in list((per_mesh or {}).get(name, budgets)) + (['auto'] if auto else []):
             t = time.perf_counter()
             if N == 'auto':
                 res = cone_unwrap(V, F, target_ratio=0.5)
@@ -193,9 +197,12 @@ def main():
     ap.add_argument('--no-xatlas', action='store_true')
     ap.add_argument('--no-auto', action='store_true', help="skip the 'auto' (target 0.5) rows")
     ap.add_argument('--big', action='store_true', help='only the 100k-triangle speed rows')
+    ap.add_argument('--acceptance', action='store_true', help='only the MovingCones rows')
     a = ap.parse_args()
     if a.big:
         big()
+    elif a.acceptance:
+        table(list(MOVING_CONES), [], False, False, False, per_mesh=MOVING_CONES)
     else:
         table(a.meshes, a.budgets, not a.no_anchor, not a.no_xatlas, not a.no_auto)
 

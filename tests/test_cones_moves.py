@@ -1,0 +1,89 @@
+"""Cone moves over k-rings, wide curvature bounds and softened cones next to flips (core.atlas.cones;
+docs/cones.md, "Placement")."""
+import numpy as np
+
+from core.atlas.cones import (L2_BOUNDS, WIDE_BOUNDS, ConeSystem, _batch_spread, _cones_near_flips, _score,
+                              _screen_moves, face_spread, move_cones, place_cones)
+from core.surfaces import blob
+
+
+def test_batch_spread_is_face_spread_per_column():
+    V, F = blob(6)
+    sy = ConeSystem(V, F)
+    rng = np.random.default_rng(1)
+    U = rng.normal(size=(sy.n, 7)) * np.linspace(0.1, 2.0, 7)
+    got = _batch_spread(sy.F, sy.A, U)
+    want = [face_spread(sy.F, sy.A, U[:, j]) for j in range(U.shape[1])]
+    assert np.allclose(got, want, rtol=1e-12, atol=0)
+
+
+def test_screened_moves_are_the_exact_angles_without_active_bounds():
+    """With bounds that do not bind, the batched KKT solve of ``_screen_moves`` is the exact area-L2
+    optimum for every candidate: its spread equals ``_score``'s."""
+    V, F = blob(6)
+    sy = ConeSystem(V, F)
+    sy.bounds = (-50.0, 50.0)
+    S = [3, 50, 200, 260, 330]
+    kap = sy.l2_angles(np.array(S))
+    assert (np.abs(kap) < 49).all()
+    cand = np.nonzero(sy.rings([S[2]], 3) & ~sy.rings(S[:2] + S[3:], 1))[0]
+    assert len(cand) > 10
+    approx = _screen_moves(sy, S, kap, 2, cand)
+    exact = [_score(sy, S[:2] + [int(v)] + S[3:])[0] for v in cand]
+    assert np.allclose(approx, exact, rtol=1e-7, atol=0)
+
+
+def test_moves_improve_the_spread_and_keep_cones_apart():
+    V, F = blob(8)
+    sy = ConeSystem(V, F)
+    rng = np.random.default_rng(4)
+    ok = sy.eligible.copy()
+    S = []
+    while len(S) < 8:                                   # random cones, none in another's one-ring
+        v = int(rng.choice(np.nonzero(ok)[0]))
+        S.append(v)
+        ok &= ~sy.rings([v], 1)
+    best, kap = _score(sy, S)
+    S2, kap2, best2, moves = move_cones(sy, S, kap, best, radius=3, sweeps=2)
+    assert moves > 0 and best2 > best
+    assert abs(best2 - _score(sy, S2)[0]) < 1e-12 and np.allclose(kap2, _score(sy, S2)[1])
+    assert abs(kap2.sum() - 4 * np.pi) < 1e-9
+    assert len(set(S2)) == len(S2) and sy.eligible[S2].all()
+    for i, v in enumerate(S2):
+        assert not sy.rings([v], 1)[np.delete(np.array(S2), i)].any()
+
+
+def test_placement_keeps_its_bounds_and_the_alternate():
+    V, F = blob(8)
+    sy = ConeSystem(V, F)
+    S, kap, hist = place_cones(sy, None, 6, sweeps=1)
+    assert sy.bounds in (L2_BOUNDS, WIDE_BOUNDS)
+    lo = np.maximum(sy.bounds[0], sy.kappa_floor[S])
+    assert (kap >= lo - 1e-9).all() and (kap <= sy.bounds[1] + 1e-9).all()
+    assert abs(kap.sum() - 4 * np.pi) < 1e-9
+    (S_alt, kap_alt, b_alt), = sy.alternates
+    assert b_alt != sy.bounds and len(S_alt) == len(kap_alt)
+    # the kept run scores at least the other one (both scored under their own bounds)
+    assert hist[-1][1] == _score(sy, list(S))[0]
+    sy.bounds = b_alt
+    assert _score(sy, list(S_alt))[0] <= hist[-1][1] + 1e-12
+
+
+def test_cones_next_to_a_flipped_triangle_are_found():
+    V, F = blob(6)
+    sy = ConeSystem(V, F)
+
+    class Cut:
+        pass
+    cut = Cut()
+    cut.F = F
+    uv = V[:, :2].copy()
+    # the projection to the xy plane keeps one half of the blob counter-clockwise, flips the other
+    e1, e2 = uv[F[:, 1]] - uv[F[:, 0]], uv[F[:, 2]] - uv[F[:, 0]]
+    bad = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0
+    assert 0 < bad.sum() < len(F)
+    S = np.array([int(F[np.nonzero(bad)[0][0], 0]), int(F[np.nonzero(~bad)[0][0], 0])])
+    near = _cones_near_flips(sy, F, {'uv': uv, 'cut': cut}, S)
+    assert near[0]
+    marked = sy.rings(np.unique(F[bad]), 1)
+    assert near[1] == marked[S[1]]
