@@ -45,6 +45,7 @@ SPLIT_RHS = 8           # SuperLU: split at least this many right-hand sides ove
 BLOCK_BYTES = 16 << 20  # SuperLU: right-hand sides are solved in column blocks of at most this size
 CHOLMOD_MIN = 300_000   # rows from which CHOLMOD is used (a disk of ~600k triangles; docs/scale.md)
 PARALLEL_MAX = 400_000  # total rows up to which factor_all runs SuperLU factorisations at once (memory)
+PARALLEL_MIN = 4_000    # total rows from which that pays (below, the threads cost more than they save)
 ND_MIN = 60_000         # rows from which fill_order computes a nested dissection order
 ND_LEAF = 16            # nested dissection stops splitting parts of at most this many rows
 _SYM_TOL = 1e-12        # relative asymmetry above which a matrix goes to SuperLU
@@ -63,8 +64,9 @@ def backend(size=None):
 
 def factor_all(*matrices, orders=None, defer_last=False):
     """``Factor`` of each matrix (with ``orders``: one fill-reducing order or None per matrix).
-    SuperLU releases the GIL, so its factorisations run on two threads up to ``PARALLEL_MAX`` rows in
-    all (above, two factorisations' work space at once would lift the peak memory of a 1M-triangle
+    SuperLU releases the GIL, so its factorisations run on two threads from ``PARALLEL_MIN`` up to
+    ``PARALLEL_MAX`` rows in all (measured at 2.2k rows: no gain; 8.4k: 15 ms against 21 ms; above
+    the maximum, two factorisations' work space at once would lift the peak memory of a 1M-triangle
     disk from 1.8 GB to 2.1 GB; docs/scale.md); CHOLMOD's binding holds the GIL (two threads measured
     no faster), so its factorisations run in turn.
 
@@ -76,9 +78,10 @@ def factor_all(*matrices, orders=None, defer_last=False):
     if len(orders) != len(matrices):
         raise ConformalError(f"{len(orders)} orders for {len(matrices)} matrices")
     methods = [_method(K.shape[0], o) for K, o in zip(matrices, orders)]
-    if WORKERS < 2 or len(matrices) < 2 or 'cholmod' in methods or \
-            sum(K.shape[0] for K in matrices) > PARALLEL_MAX:
-        if defer_last and WORKERS > 1 and methods[-1] == 'superlu' and len(matrices) > 1:
+    rows = sum(K.shape[0] for K in matrices)
+    in_turn = WORKERS < 2 or len(matrices) < 2 or 'cholmod' in methods
+    if in_turn or not PARALLEL_MIN <= rows <= PARALLEL_MAX:
+        if defer_last and not in_turn and rows > PARALLEL_MAX:
             done = [Factor(K, order=o) for K, o in zip(matrices[:-1], orders[:-1])]
             return done + [FactorJob(matrices[-1], order=orders[-1])]
         return [Factor(K, order=o) for K, o in zip(matrices, orders)]
