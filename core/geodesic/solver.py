@@ -66,13 +66,13 @@ SEED_RADIUS = 24.0
 UNRESOLVED = 2.0     # a triangle whose surface cell h / mu exceeds this times its mean edge is not resolved
 METRIC_PASSES = 2    # mu_mode 'metric': marches with the exact metric after the isotropic first one
 SWEEP_SEED_RADIUS = 36.0
-UPWIND = True
-# Local refinement at a source (docs/geodesic.md, "Refined seed"): where the chart's cell at a source is
-# coarse in surface units (fewer than FINE_NODES nodes per edge of the source's triangles), the seed
-# comes from a march on a finer grid over a window of FINE_WINDOW cells (UV radius) around it.
-FINE_NODES = 16.0
+# Refined seed (docs/geodesic.md, "Refined seed"): where the chart's cell at a source is coarse in
+# surface units (fewer than FINE_NODES nodes per edge of the source's triangles), the seed comes from
+# shortest paths on the mesh through Steiner points, over the triangles within FINE_WINDOW cells (UV
+# radius) of the source, at most FINE_MAX_FACES of them (the nearest).
+FINE_NODES = 4.0
 FINE_WINDOW = 48.0
-FINE_MAX = 1024      # nodes along the longer side of a refined window, at most
+FINE_MAX_FACES = 12000
 
 
 # --------------------------------------------------------------------------------------------------
@@ -138,12 +138,7 @@ def directional_mu(T, valid, face, ginv):
         none = ~np.isfinite(lo_s) & ~np.isfinite(hi_s)
         lo, hi = np.where(none, lo, lo_s), np.where(none, hi, hi_s)
         both = np.isfinite(lo) & np.isfinite(hi)
-        if UPWIND:
-            dm, dp = c - lo, hi - c
-            up = np.where(lo <= hi, dm, dp)
-            d = np.where(both, np.where((dm > 0) | (dp < 0), up, 0.0), np.nan)
-        else:
-            d = np.where(both, 0.5 * (hi - lo), np.nan)
+        d = np.where(both, 0.5 * (hi - lo), np.nan)
         d = np.where(~both & np.isfinite(hi), hi - c, d)
         return np.where(~both & ~np.isfinite(hi) & np.isfinite(lo), c - lo, d)
 
@@ -1360,16 +1355,19 @@ class GeodesicSolver:
     def _fine_seed(self, ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius, calibrate):
         """Refined seeds (docs/geodesic.md, "Refined seed"). Where the chart's cell at a source is coarse
         in surface units (``h / mu`` above ``1 / FINE_NODES`` of the mean edge of the source's triangles,
-        ``mu`` the smallest of theirs), the seed comes from a march on a grid ``FINE_NODES / (nodes per
-        edge)`` times finer, over the triangles within ``FINE_WINDOW`` cells (UV) of the source (the
-        connected part holding it; at most ``FINE_MAX`` nodes across). Its times are exact (to its finer
-        resolution) up to ``tau``, the 3D distance from the source to the window's cut boundary: no
-        geodesic shorter than that leaves the window.
+        ``mu`` the smallest of theirs), the grid cannot resolve the map's per-triangle metric near the
+        source, and its isotropic or directional speeds leave a deficit that travels outward. There the
+        seed takes shortest paths on the mesh through ``STEINER`` points per edge
+        (``steiner_distances``) over the triangles within ``FINE_WINDOW`` cells (UV) of the source (the
+        connected part holding it, at most ``FINE_MAX_FACES``). They are exact to the Steiner paths'
+        small excess up to ``tau``, the 3D distance from the source to the window's cut boundary: no
+        geodesic shorter than that leaves the window. A grid node takes the shortest path to a point of
+        its triangle's boundary plus the straight segment to it in the triangle.
 
         ``S_uv`` (q,2) the sources' UV positions (vertex sources ``loc`` (a,) first, then points in the
         local faces ``src_faces`` (b,)). Returns a list (q,) of None (not refined) or ``(Tn, tv, tau,
         marches)``: ``Tn`` (ny, nx) times at the chart's grid nodes (inf outside the window), ``tv``
-        (k,) at the chart's vertices (inf outside), ``tau`` (mesh units), marches used."""
+        (k,) at the chart's vertices (inf outside), ``tau`` (mesh units), marches used (0)."""
         G, h = ch.grid, ch.grid.h
         out = [None] * len(S_uv)
         cache = getattr(ch, 'fine_cache', None)
@@ -1397,11 +1395,12 @@ class GeodesicSolver:
             per_edge = float(cache['edge'][star].mean()) * mu_min / h       # nodes per edge at the source
             if per_edge >= FINE_NODES:
                 continue
-            h_f = h * per_edge / FINE_NODES
             wr = FINE_WINDOW * h
-            wr = min(wr, 0.5 * (FINE_MAX - 8) * h_f)
-            near_v = np.linalg.norm(ch.uv - S_uv[i], axis=1) <= wr
-            fsel = np.flatnonzero(near_v[ch.F].any(1))
+            dist_v = np.linalg.norm(ch.uv - S_uv[i], axis=1)
+            fsel = np.flatnonzero((dist_v[ch.F] <= wr).any(1))
+            if len(fsel) > FINE_MAX_FACES:              # the nearest triangles only
+                dmin = dist_v[ch.F[fsel]].min(1)
+                fsel = np.sort(fsel[np.argsort(dmin, kind='stable')[:FINE_MAX_FACES]])
             fsel = np.union1d(fsel, star)
             # the connected part of the window that holds the source
             import scipy.sparse as sp
