@@ -72,7 +72,7 @@ SWEEP_SEED_RADIUS = 36.0
 # radius) of the source, at most FINE_MAX_FACES of them (the nearest).
 FINE_NODES = 4.0
 FINE_WINDOW = 48.0
-FINE_MAX_FACES = 12000
+FINE_MAX_FACES = 6000
 
 
 # --------------------------------------------------------------------------------------------------
@@ -220,7 +220,7 @@ class MeshRelax:
         return max_iter
 
 
-STEINER = 6          # Steiner points per edge in the refined seed's shortest paths (``steiner_distances``)
+STEINER = 10         # Steiner points per edge in the refined seed's shortest paths (``steiner_distances``)
 
 
 def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER):
