@@ -15,11 +15,11 @@ exact reference is MMP on the same cut surface (its split vertices), restricted 
 
 Errors: relative to the exact distance, mean and max over the vertices of the source's part farther
 than ``EXCLUDE`` times the part's bounding-box diagonal from the source; a vertex split by a seam counts
-once, with the smallest distance over its copies (for every method and for MMP alike). Three sources
-per mesh, chosen at random (seed 0) among the vertices of the largest part. Times are wall-clock
-seconds on a shared 2-core machine (noisy): set-up (flattening, rasterising) and one query separately,
-heat likewise (factorisation, one solve). Mesh fast marching is not measured: no installable
-package provides it.
+once, with the smallest distance over its copies (for every method and for MMP alike). Four source
+sets per mesh in its largest part (``source_sets``: central, far, highest curvature, all three). Times
+are wall-clock seconds on a shared 2-core machine (noisy): set-up (flattening, rasterising) and one
+query separately, heat and mesh fast marching (potpourri3d, when installed) likewise. The measured
+tables are in docs/geodesic.md ("Real meshes").
 """
 import argparse
 import json

@@ -27,7 +27,7 @@ DATA = os.path.join(ROOT, 'tests', 'data')
 REFS = (
     ('bump', 129, (0, 8320, 64)),
     ('bump', 65, (0, 2112, 32)),
-    ('edgebump', 65, (0, 2112, 32)),
+    ('edgebump', 65, (0, 2112, 32, 2138)),     # 2138: the peak, the vertex of largest angle defect
 )
 
 

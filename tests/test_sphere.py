@@ -239,6 +239,35 @@ def test_geodesic_numpy_sweep_fallback():
     assert (np.abs(d[m] - gc[m]) / gc[m]).mean() < 0.02
 
 
+def test_geodesic_warns_where_the_sphere_map_shrinks_the_surface():
+    """A Moebius map that squeezes half the sphere 8x (conformal, fold-free) on a coarse grid leaves the
+    charts unable to resolve it: the report must say so, and every distance stays within the exact
+    bounds (the 3D distance, the edge paths). The uniform map (S = V) gives no warning."""
+    from scipy.sparse.csgraph import dijkstra
+    import scipy.sparse as sp
+    from core.sphere.geodesic import sphere_geodesic
+    V, F = icosphere(10)
+    s, K = 5, 8.0
+    d, rep = sphere_geodesic(V, F, [s], S=V)
+    assert rep['warnings'] == [] and rep['unresolved_fraction'] < 0.01
+    pole = V[:, 2] < -1 + 1e-12
+    with np.errstate(divide='ignore', invalid='ignore'):
+        w = (V[:, 0] + 1j * V[:, 1]) / (1.0 + V[:, 2]) * K           # stereographic, scaled: Moebius
+    r2 = np.abs(w) ** 2
+    S = np.c_[2 * w.real / (1 + r2), 2 * w.imag / (1 + r2), (1 - r2) / (1 + r2)]
+    S[pole] = [0.0, 0.0, -1.0]
+    d, rep = sphere_geodesic(V, F, [s], S=S, grid=128)
+    assert rep['unresolved_fraction'] > 0.1 and rep['clamped']['below_euclid'] > 0
+    assert any('do not resolve' in m for m in rep['warnings']), rep['warnings']
+    E = np.linalg.norm(V - V[s], axis=1)
+    Ed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    wt = np.linalg.norm(V[Ed[:, 0]] - V[Ed[:, 1]], axis=1)
+    G = sp.coo_matrix((np.r_[wt, wt], (np.r_[Ed[:, 0], Ed[:, 1]], np.r_[Ed[:, 1], Ed[:, 0]])),
+                      shape=(len(V), len(V))).tocsr()
+    up = dijkstra(G, indices=s)
+    assert (d >= E - 1e-12).all() and (d <= up * (1 + 1e-12)).all()
+
+
 def test_geodesic_bad_sources():
     from core.sphere.geodesic import sphere_geodesic
     V, F = icosphere(3)

@@ -66,6 +66,13 @@ SEED_RADIUS = 24.0
 UNRESOLVED = 2.0     # a triangle whose surface cell h / mu exceeds this times its mean edge is not resolved
 METRIC_PASSES = 2    # mu_mode 'metric': marches with the exact metric after the isotropic first one
 SWEEP_SEED_RADIUS = 36.0
+# Refined seed (docs/geodesic.md, "Refined seed"): where the chart's cell at a source is coarse in
+# surface units (fewer than FINE_NODES nodes per edge of the source's triangles), the seed comes from
+# shortest paths on the mesh through Steiner points, over the triangles within FINE_WINDOW cells (UV
+# radius) of the source, at most FINE_MAX_FACES of them (the nearest).
+FINE_NODES = 4.0
+FINE_WINDOW = 48.0
+FINE_MAX_FACES = 6000
 
 
 # --------------------------------------------------------------------------------------------------
@@ -119,16 +126,24 @@ def directional_mu(T, valid, face, ginv):
     get the isotropic ``sqrt(sqrt(det G^-1))``. NaN-free; 1 at unused nodes."""
     Tf = np.where(valid & np.isfinite(T), T, np.nan)
     pad = np.pad(Tf, 1, constant_values=np.nan)
+    fpad = np.pad(face, 1, constant_values=-1)
     c = pad[1:-1, 1:-1]
+    fc = fpad[1:-1, 1:-1]
 
-    def diff(lo, hi):
+    def diff(lo, hi, flo, fhi):
+        # the gradient inside the node's own triangle: neighbours in another triangle are used only
+        # when neither neighbour on that axis is in it (the gradient jumps across triangle edges)
+        lo_s = np.where(flo == fc, lo, np.nan)
+        hi_s = np.where(fhi == fc, hi, np.nan)
+        none = ~np.isfinite(lo_s) & ~np.isfinite(hi_s)
+        lo, hi = np.where(none, lo, lo_s), np.where(none, hi, hi_s)
         both = np.isfinite(lo) & np.isfinite(hi)
         d = np.where(both, 0.5 * (hi - lo), np.nan)
         d = np.where(~both & np.isfinite(hi), hi - c, d)
         return np.where(~both & ~np.isfinite(hi) & np.isfinite(lo), c - lo, d)
 
-    gx = diff(pad[1:-1, :-2], pad[1:-1, 2:])
-    gy = diff(pad[:-2, 1:-1], pad[2:, 1:-1])
+    gx = diff(pad[1:-1, :-2], pad[1:-1, 2:], fpad[1:-1, :-2], fpad[1:-1, 2:])
+    gy = diff(pad[:-2, 1:-1], pad[2:, 1:-1], fpad[:-2, 1:-1], fpad[2:, 1:-1])
     nrm = np.hypot(gx, gy)
     f = np.where(face >= 0, face, 0)
     a, b, cc = ginv[f, 0], ginv[f, 1], ginv[f, 2]
@@ -203,6 +218,52 @@ class MeshRelax:
             if not changed.any():
                 return it
         return max_iter
+
+
+STEINER = 10         # Steiner points per edge in the refined seed's shortest paths (``steiner_distances``)
+
+
+def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER):
+    """Shortest paths on the surface of the triangles ``F`` (m,3) (vertices ``V`` (n,3)) from a source
+    vertex ``src`` or a point ``X`` (3,) in the triangles ``src_faces``, through ``k`` Steiner points on
+    every edge: a graph joining every pair of points (vertices and Steiner points) on the boundary of
+    each triangle by the straight segment inside it. Each graph path is a path on the surface, so the
+    distances are upper bounds of the geodesic ones, and tend to them as ``k`` grows (docs/geodesic.md,
+    "Refined seed"). Returns ``(dv (n,) at the vertices, inf off F; dS (p,) at every graph point; P
+    (p,3) the points; own (m, 3 + 3k) the points on each triangle's boundary)``."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import dijkstra
+    n, m = len(V), len(F)
+    Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
+    ue, inv = np.unique(Ed, axis=0, return_inverse=True)
+    inv = inv.reshape(3, m).T                                            # (m,3) edge of each side
+    t = np.arange(1, k + 1) / (k + 1)
+    P = V[ue[:, 0]][:, None] * (1 - t)[None, :, None] + V[ue[:, 1]][:, None] * t[None, :, None]
+    pts = np.concatenate([V, P.reshape(-1, 3)])
+    pid = n + np.arange(len(ue) * k).reshape(len(ue), k)
+    own = np.concatenate([F, pid[inv].reshape(m, 3 * k)], 1)              # (m, 3 + 3k)
+    q = own.shape[1]
+    a = np.repeat(own, q, axis=1).ravel()
+    b = np.tile(own, (1, q)).ravel()
+    N = len(pts)
+    keep = a < b
+    # a pair on an edge shared by two triangles appears twice: once (sparse matrices add duplicates)
+    _, first = np.unique(a[keep] * N + b[keep], return_index=True)
+    a, b = a[keep][first], b[keep][first]
+    w = np.maximum(np.linalg.norm(pts[a] - pts[b], axis=1), 1e-300)
+    if src is not None:
+        G = sp.coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(N, N)).tocsr()
+        dS = dijkstra(G, directed=True, indices=int(src))
+    else:
+        cand = np.unique(own[np.asarray(src_faces)].ravel())
+        wx = np.maximum(np.linalg.norm(pts[cand] - X, axis=1), 1e-300)
+        G = sp.coo_matrix((np.r_[w, w, wx], (np.r_[a, b, np.full(len(cand), N)], np.r_[b, a, cand])),
+                          shape=(N + 1, N + 1)).tocsr()
+        dS = dijkstra(G, directed=True, indices=N)[:N]
+    dv = np.full(n, np.inf)
+    used = np.unique(F)
+    dv[used] = dS[used]
+    return dv, dS, pts, own
 
 
 # --------------------------------------------------------------------------------------------------
@@ -826,9 +887,9 @@ class Chart:
     ``cell`` the mean grid cell in surface units; ``error_estimate`` (mean relative, at the typical
     distance; a query re-estimates it from its own distances)."""
 
-    def __init__(self, V, F, uv, verts, faces, grid, target, mu_mode='metric'):
+    def __init__(self, V, F, uv, verts, faces, grid, target, mu_mode='metric', align=True):
         self.verts, self.faces, self.V, self.F = verts, faces, V, F
-        self.uv = uv = align_uv(uv)
+        self.uv = uv = align_uv(uv) if align else uv
         self.mu_face = mu_f = face_mu(V, F, uv)
         self.area = face_areas(V, F)
         # the mesh term of the error: none when marching with the exact per-triangle metric
@@ -1136,7 +1197,7 @@ class GeodesicSolver:
         N = len(self.vert_of)
         dist_s = np.full(N, np.inf)
         marches, radii, reached = 0, [], 0
-        hybrid, hybrid_skipped = 0, 0
+        hybrid, hybrid_skipped, refined = 0, 0, 0
         active = np.unique(np.r_[self.chart_of_split[src_split], self.face_island[pf]]).astype(np.int64)
         for k, c in enumerate(active):
             say(0.05 + 0.85 * k / len(active), 'marching')
@@ -1146,8 +1207,9 @@ class GeodesicSolver:
             S_uv = np.concatenate([ch.uv[loc], np.einsum('kc,kcd->kd', pb[mine], ch.uv[ch.F[np.searchsorted(
                 ch.faces, pf[mine])]])]) if mine.any() else ch.uv[loc]
             src_faces = np.searchsorted(ch.faces, pf[mine]) if mine.any() else np.zeros(0, np.int64)
-            d, r, nm = self._march_chart(ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius,
-                                         calibrate)
+            d, r, nm, _, nf = self._march_chart(ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius,
+                                                calibrate)
+            refined += nf
             if ch.free is not None:
                 if ch.free[loc].any() or ch.unresolved[src_faces].any():
                     hybrid_skipped += 1
@@ -1205,7 +1267,7 @@ class GeodesicSolver:
         report.update({
             'grid': [ny, nx], 'cell': G.grid.h, 'masked_fraction': float(1 - G.grid.inside.mean()),
             'solver': self.solver, 'sources': int(len(X_src)), 'seed_radius': float(min(radii)),
-            'on_mesh': hybrid, 'marches': marches,
+            'on_mesh': hybrid, 'refined_sources': refined, 'marches': marches,
             'metric_passes': max(self.charts[c].metric_passes for c in active),
             'islands': len(self.charts), 'islands_reached': reached,
             'error_estimate': est, 'clamped': clamped, 'filled_from_edges': filled, 'warnings': warnings,
@@ -1213,10 +1275,13 @@ class GeodesicSolver:
         })
         return dist, report
 
-    def _march_chart(self, ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius, calibrate):
+    def _march_chart(self, ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius, calibrate,
+                     refine=True):
         """Distances (k,) at one chart's vertices from the sources on it: ``S_uv`` (q,2) their UV
         positions (vertex sources ``loc`` (a,) local indices first, then the surface points in local
-        faces ``src_faces`` (b,)). Returns (dist (k,), seed radius in cells, number of marches)."""
+        faces ``src_faces`` (b,)). ``refine``: seed from a finer grid where the chart's cell is coarse at a
+        source (``_fine_seed``). Returns (dist (k,), seed radius in cells, number of marches, the grid's
+        travel times (ny, nx), number of refined sources)."""
         G, mu, valid, inv_mu = ch.grid, ch.mu, ch.valid, ch.inv_mu
         march_on = ch.march_on                      # inside nodes and the rim nodes that bridge no gap
         rim = valid & ~march_on
@@ -1229,13 +1294,39 @@ class GeodesicSolver:
         src_local[loc] = True
         T = np.full(G.shape, np.inf)
         near = np.full(len(ch.V), np.inf)
+        fixed = np.full(len(ch.V), np.inf)         # vertices inside a refined seed: its values, as they are
         used = None
         groups = _groups(mu_s)
+        fine = (self._fine_seed(ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius, calibrate)
+                if refine else [None] * len(S))
+        n_fine, fine_marches = 0, 0
         for idx in groups:
-            tau = radius * G.h / float(mu_s[idx].min())
             reach = radius * float(mu_s[idx].max() / mu_s[idx].min())
-            Tloc = _local_times(G, inv_mu, valid, S[idx], reach, domain=march_on, metric=ch.seed_metric)
-            Tloc = self._exact_seed(ch, Tloc, tree, X_src, upper, src_local, src_faces)
+            sub = [fine[i] for i in idx]
+            if all(f is not None for f in sub):
+                # every source of the group has a refined seed: exact up to its radius tau
+                tau = min(f[2] for f in sub)
+                Tloc = np.minimum.reduce([f[0] for f in sub])
+                tv = np.minimum.reduce([f[1] for f in sub])
+                if ch.ginv is None:
+                    # the map is a similarity (a planar mesh): the straight chart segment is exact, and
+                    # shorter than the Steiner paths (their excess is largest there); elsewhere its
+                    # length, from a coarse grid's nodes, is no bound (tried: edgebump's peak 0.05 %
+                    # -> 0.16 %)
+                    wide = FINE_WINDOW * float(mu_s[idx].max() / mu_s[idx].min())
+                    Ts = _local_times(G, inv_mu, valid, S[idx], wide, domain=march_on)
+                    Ts = self._exact_seed(ch, Ts, tree, X_src, upper, src_local, src_faces)
+                    Tloc = np.where(np.isfinite(Tloc), np.fmin(Tloc, Ts), Tloc)
+                    nv = _local_times(G, inv_mu, valid, S[idx], wide + 2, pts=ch.P, domain=march_on)
+                    tv = np.fmin(tv, np.maximum(nv, tree.query(ch.V)[0]))
+                fixed = np.where(tv <= tau, np.fmin(fixed, tv), fixed)
+                n_fine += len(sub)
+                fine_marches += sum(f[3] for f in sub)
+            else:
+                tau = radius * G.h / float(mu_s[idx].min())
+                Tloc = _local_times(G, inv_mu, valid, S[idx], reach, domain=march_on, metric=ch.seed_metric)
+                Tloc = self._exact_seed(ch, Tloc, tree, X_src, upper, src_local, src_faces)
+                sub = None
             h_far = 4.0 * G.h
             phi = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * mu, h_far)
             phi = np.minimum(phi, h_far)
@@ -1262,14 +1353,126 @@ class GeodesicSolver:
             if rim.any():
                 Tg = np.where(rim & ~seed, extrapolate_rim(Tg, march_on, rim, G.h, inv_mu), Tg)
             np.minimum(T, Tg, out=T)
-            nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=ch.P, domain=march_on,
-                              metric=ch.seed_metric)
-            near = np.where(nv <= tau, np.fmin(near, nv), near)
+            if sub is None:
+                nv = _local_times(G, inv_mu, valid, S[idx], reach + 2, pts=ch.P, domain=march_on,
+                                  metric=ch.seed_metric)
+                near = np.where(nv <= tau, np.fmin(near, nv), near)
         T[~valid] = np.inf
         sample = valid & ~ch.gap               # nodes that face a gap are no sample of either side
         dist = bilinear(np.where(sample, T, np.nan), ch.P, sample, ch.corner_ok)
-        dist = np.fmin(dist, near)
-        return dist, radius, len(groups) * (1 + ch.metric_passes)
+        dist = np.where(np.isfinite(fixed), fixed, np.fmin(dist, near))
+        return dist, radius, len(groups) * (1 + ch.metric_passes) + fine_marches, T, n_fine
+
+    def _fine_seed(self, ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius, calibrate):
+        """Refined seeds (docs/geodesic.md, "Refined seed"). Where the chart's cell at a source is coarse
+        in surface units (``h / mu`` above ``1 / FINE_NODES`` of the mean edge of the source's triangles,
+        ``mu`` the smallest of theirs), the grid cannot resolve the map's per-triangle metric near the
+        source, and its isotropic or directional speeds leave a deficit that travels outward. There the
+        seed takes shortest paths on the mesh through ``STEINER`` points per edge
+        (``steiner_distances``) over the triangles within ``FINE_WINDOW`` cells (UV) of the source (the
+        connected part holding it, at most ``FINE_MAX_FACES``). They are exact to the Steiner paths'
+        small excess up to ``tau``, the 3D distance from the source to the window's cut boundary: no
+        geodesic shorter than that leaves the window. A grid node takes the shortest path to a point of
+        its triangle's boundary plus the straight segment to it in the triangle.
+
+        ``S_uv`` (q,2) the sources' UV positions (vertex sources ``loc`` (a,) first, then points in the
+        local faces ``src_faces`` (b,)). Returns a list (q,) of None (not refined) or ``(Tn, tv, tau,
+        marches)``: ``Tn`` (ny, nx) times at the chart's grid nodes (inf outside the window), ``tv``
+        (k,) at the chart's vertices (inf outside), ``tau`` (mesh units), marches used (0)."""
+        G, h = ch.grid, ch.grid.h
+        out = [None] * len(S_uv)
+        cache = getattr(ch, 'fine_cache', None)
+        if cache is None:
+            Fc = ch.F
+            E = np.sort(np.concatenate([Fc[:, [0, 1]], Fc[:, [1, 2]], Fc[:, [2, 0]]]), 1)
+            key = E[:, 0] * len(ch.V) + E[:, 1]
+            u, cnt = np.unique(key, return_counts=True)
+            cache = ch.fine_cache = {'bkeys': u[cnt == 1], 'edge': mean_edges(ch.V, Fc)}
+        nV = len(ch.V)
+        for i in range(len(S_uv)):
+            if i < len(loc):
+                star = np.flatnonzero((ch.F == loc[i]).any(1))
+                Xs = ch.V[loc[i]]
+            else:
+                f = int(src_faces[i - len(loc)])
+                star = np.array([f])
+                W = ch.uv[ch.F[f]]
+                A = np.c_[W[1] - W[0], W[2] - W[0]]
+                b = np.linalg.solve(A, S_uv[i] - W[0])
+                Xs = ch.V[ch.F[f, 0]] * (1 - b.sum()) + ch.V[ch.F[f, 1]] * b[0] + ch.V[ch.F[f, 2]] * b[1]
+            if not len(star):
+                continue
+            mu_min = float(ch.mu_face[star].min())
+            per_edge = float(cache['edge'][star].mean()) * mu_min / h       # nodes per edge at the source
+            if per_edge >= FINE_NODES:
+                continue
+            wr = FINE_WINDOW * h
+            dist_v = np.linalg.norm(ch.uv - S_uv[i], axis=1)
+            fsel = np.flatnonzero((dist_v[ch.F] <= wr).any(1))
+            if len(fsel) > FINE_MAX_FACES:              # the nearest triangles only
+                dmin = dist_v[ch.F[fsel]].min(1)
+                fsel = np.sort(fsel[np.argsort(dmin, kind='stable')[:FINE_MAX_FACES]])
+            fsel = np.union1d(fsel, star)
+            # the connected part of the window that holds the source
+            import scipy.sparse as sp
+            from scipy.sparse.csgraph import connected_components
+            Fw = ch.F[fsel]
+            sv, Fl = np.unique(Fw, return_inverse=True)
+            Fl = Fl.reshape(-1, 3)
+            k = len(sv)
+            adj = sp.coo_matrix((np.ones(2 * len(Fl)), (np.r_[Fl[:, 0], Fl[:, 1]],
+                                                         np.r_[Fl[:, 1], Fl[:, 2]])), shape=(k, k))
+            _, lab = connected_components(adj, directed=False)
+            own = lab[Fl[np.searchsorted(fsel, star[0]), 0]]
+            keepf = lab[Fl[:, 0]] == own
+            fsel = fsel[keepf]
+            Fw = ch.F[fsel]
+            if np.isin(star, fsel).sum() < len(star):
+                continue
+            sv, Fl = np.unique(Fw, return_inverse=True)
+            Fl = Fl.reshape(-1, 3)
+            # the window's cut boundary: its boundary edges that are not the chart's
+            E = np.sort(np.concatenate([Fw[:, [0, 1]], Fw[:, [1, 2]], Fw[:, [2, 0]]]), 1)
+            key = E[:, 0] * nV + E[:, 1]
+            u, first, cnt = np.unique(key, return_index=True, return_counts=True)
+            cut = E[first[(cnt == 1) & ~np.isin(u, cache['bkeys'])]]
+            if len(cut):
+                a, b = ch.V[cut[:, 0]], ch.V[cut[:, 1]]
+                d = b - a
+                t = np.clip(((Xs - a) * d).sum(1) / np.maximum((d * d).sum(1), 1e-300), 0.0, 1.0)
+                tau = float(np.linalg.norm(a + t[:, None] * d - Xs, axis=1).min())
+            else:
+                tau = np.inf
+            if tau < 3.0 * h / mu_min:                  # the window would not reach past the coarse seed
+                continue
+            # shortest paths on the window's surface through Steiner points on its edges (exact in
+            # the limit; an upper bound, a path on the surface, at any STEINER)
+            dv, dS, pts3, own = steiner_distances(ch.V, Fw, loc[i] if i < len(loc) else None, Xs,
+                                                  star if i >= len(loc) else None, STEINER)
+            tau = min(tau, float(np.max(dv[sv][np.isfinite(dv[sv])])))
+            # the chart's grid nodes in the window: the shortest path to a point on their triangle's
+            # boundary, then the straight segment inside the triangle
+            c = G.coords(S_uv[i:i + 1])[0]
+            r = wr / h + 2
+            i0, i1 = max(int(c[1] - r), 0), min(int(c[1] + r) + 1, G.shape[0])
+            j0, j1 = max(int(c[0] - r), 0), min(int(c[0] + r) + 1, G.shape[1])
+            ii, jj = np.mgrid[i0:i1, j0:j1]
+            ii, jj = ii.ravel(), jj.ravel()
+            fnode = G.face[ii, jj]
+            row = np.full(len(ch.F), -1, np.int64)
+            row[fsel] = np.arange(len(fsel))
+            ok = (fnode >= 0) & (row[np.maximum(fnode, 0)] >= 0) & ch.valid[ii, jj]
+            ii, jj, fnode = ii[ok], jj[ok], fnode[ok]
+            X, _ = ch.node_points(ii, jj)
+            cand = own[row[fnode]]                                            # (q, 3 + 3 STEINER)
+            val = (dS[cand] + np.linalg.norm(pts3[cand] - X[:, None], axis=2)).min(1)
+            Tn = np.full(G.shape, np.inf)
+            Tn[ii, jj] = val
+            tv = np.full(nV, np.inf)
+            tv[sv] = dv[sv]
+            nm = 0
+            out[i] = (Tn, tv, tau, nm)
+        return out
 
     def _fill_unreached(self, dist_s, charts):
         """Vertices of the ``charts`` (indices) that no grid node reached (UV slivers thinner than a

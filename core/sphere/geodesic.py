@@ -131,7 +131,11 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     ``core.geodesic.solver.eikonal_march`` ('auto', 'skfmm', 'sweep'). ``overlap``: half-width of the
     band the two
     charts share, in degrees of latitude. ``source_radius``: exact seed disk radius, in cells.
-    Returns ``(dist (n,) float64 in mesh units, report dict)``."""
+    Every distance is clamped between the 3D distance to the nearest source and the shortest edge path
+    (``report['clamped']`` counts them). Returns ``(dist (n,) float64 in mesh units, report dict)``; the
+    report's ``warnings`` (list of str) name a folded sphere map, an area fraction above 1 % that the
+    charts do not resolve (``unresolved_fraction``: surface cell above twice the triangle's mean edge),
+    and more than 1 % of the vertices clamped."""
     from ..geodesic.solver import calibrate_phi
     from ..mesh.measures import vertex_mu
     say = progress or (lambda f, msg: None)
@@ -236,8 +240,11 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
         lo = min(float(np.min(np.where(c.valid & (T[k] > tau - W), T[k], np.inf)))
                  for k, c in enumerate(charts))
         if not np.isfinite(lo):
+            flips = int((report.get('sphere') or {}).get('flips') or 0)
+            why = (f" (the sphere map folds {flips} triangles: cut the mesh along seams and use the planar "
+                   "solver)" if flips else "")
             raise ConformalError("the fast marching front stopped before covering the sphere: "
-                                 "increase the grid size")
+                                 "increase the grid size" + why)
     seconds_march = time.perf_counter() - t
     # sample at the vertices from the chart where each is more interior
     say(0.9, 'sampling')
@@ -269,9 +276,52 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     if not np.isfinite(dist).all():
         bad = int((~np.isfinite(dist)).sum())
         raise ConformalError(f"{bad} vertices were not reached by the front: increase the grid size")
+    # exact bounds: the 3D distance to the nearest source below, the shortest edge path above
+    from scipy.sparse.csgraph import dijkstra
+    from scipy.spatial import cKDTree
+    import scipy.sparse as sp
+    E3, _ = cKDTree(V[src]).query(V)
+    Ed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    wt = np.maximum(np.linalg.norm(V[Ed[:, 0]] - V[Ed[:, 1]], axis=1), 1e-300)
+    graph = sp.coo_matrix((np.r_[wt, wt], (np.r_[Ed[:, 0], Ed[:, 1]], np.r_[Ed[:, 1], Ed[:, 0]])),
+                          shape=(n, n)).tocsr()
+    upper = dijkstra(graph, indices=np.unique(src), min_only=True)
+    low, high = dist < E3, dist > upper
+    clamped = {'below_euclid': int(low.sum()), 'above_edges': int(high.sum())}
+    dist = np.clip(dist, E3, np.maximum(upper, E3))
+    # how well the charts resolve the surface: a triangle whose surface cell (the chart's cell over its
+    # speed there, in the chart where its centroid is more interior) is above twice its mean edge is
+    # not resolved (docs/geodesic.md, "Sphere mode")
+    cen = S[F].mean(1)
+    cen /= np.linalg.norm(cen, axis=1)[:, None]
+    edge = np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean(1)
+    cell = np.empty(len(F))
+    ok = np.isfinite(cen).all(1)
+    cell[~ok] = np.nan
+    for c, sel in zip(charts, (ok & (cen[:, 2] >= 0), ok & (cen[:, 2] < 0))):
+        sp_c = c.sample(c.speed, c.coords_of(cen[sel]))
+        cell[sel] = c.h / np.where(np.isfinite(sp_c) & (sp_c > 0), sp_c, np.nan)
+    A = face_areas(V, F)
+    bad_f = ~(cell <= 2.0 * edge)
+    unresolved = float(A[bad_f].sum() / A.sum())
+    warnings = []
+    flips = int((report.get('sphere') or {}).get('flips') or 0)
+    if flips:
+        warnings.append(f"the sphere map folds {flips} triangles: distances through them are unreliable; "
+                        "cut the mesh along seams and use the planar solver")
+    if unresolved > 0.01:
+        warnings.append(f"the sphere charts do not resolve {100 * unresolved:.2g}% of the surface (grid "
+                        "cells larger than twice the triangles, where the sphere map shrinks the surface): "
+                        "expect errors of several percent there; use a larger grid, or cut the mesh along "
+                        "seams and use the planar solver")
+    nv = int(clamped['below_euclid'] + clamped['above_edges'])
+    if nv > 0.01 * n:
+        warnings.append(f"{nv} vertices ({100 * nv / n:.2g}%) fell outside the exact bounds (3D distance, "
+                        "edge paths) and were clamped: the sphere march is inaccurate on this mesh")
     report.update({'grid': list(charts[0].G.shape), 'cell': [c.h for c in charts], 'charts': 2,
                    'overlap_deg': overlap, 'buckets': buckets, 'bucket_width': W, 'solver': used,
-                   'sources': int(src.size),
+                   'sources': int(src.size), 'clamped': clamped, 'unresolved_fraction': unresolved,
+                   'warnings': warnings,
                    'seconds': {'march': round(seconds_march, 4),
                                'total': round(time.perf_counter() - t0, 4)}})
     return dist, report
