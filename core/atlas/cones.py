@@ -1137,6 +1137,7 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
     its cut disk and layout; ``seams`` (k,2). Returns (cut, uvc, seams, crossings left, splits)."""
     n = len(V)
     splits = 0
+    base = np.asarray(seams, np.int64).reshape(-1, 2)
     while True:
         pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands)
         bad = [i for i, (c, _, _) in enumerate(pieces) if c]
@@ -1182,6 +1183,8 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
         uv2[new.F.ravel()] = uvc[cut.F.ravel()]
         cut, uvc = new, uv2
         splits += 1
+    if cut.n_islands > 1:
+        cut, uvc, seams = merge_charts(F, n, cut, uvc, seams, base)
     left = sum(c for c, _, _ in _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands))
     if cut.n_islands > 1:
         # move the pieces apart
@@ -1195,6 +1198,92 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
         off, _ = shelf_pack(size, 0.02 * np.sqrt((size[:, 0] * size[:, 1]).sum()))
         uvc = uvc - lo[vi] + off[vi]
     return cut, uvc, seams, int(left), splits
+
+
+def _is_path(keys, n):
+    """True if the edges ``keys`` (k,) (vertex pairs as ``a*n + b``) form one simple path."""
+    E = np.stack([keys // n, keys % n], 1)
+    verts, inv = np.unique(E, return_inverse=True)
+    if len(verts) != len(E) + 1 or np.bincount(inv.ravel()).max() > 2:
+        return False
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+    inv = inv.reshape(-1, 2)
+    g = sp.coo_matrix((np.ones(len(E)), (inv[:, 0], inv[:, 1])), shape=(len(verts),) * 2)
+    return connected_components(g, directed=False)[0] == 1
+
+
+def merge_charts(F, n, cut, uvc, seams, base):
+    """Glue charts of one flat layout back together where that does not overlap (docs/cones.md,
+    "Charts"). ``F`` (m,3) the working mesh with ``n`` vertices; ``cut`` (``islands.Cut``) and ``uvc``
+    (N,2) its pieces (disks), all laid out by the same flat metric and not yet moved apart, so two
+    pieces that share a split seam have equal coordinates on both sides of it; ``seams`` (k,2) the cut
+    with the splits; ``base`` (k0,2) the seams that must stay (the cut tree). Greedy: pairs of pieces
+    joined by split seams, the longest shared seam first, are glued when the shared seam is one path
+    (the union is a disk) and the union's boundary crosses itself no more often than the two pieces'
+    boundaries did. Returns (cut, uvc, seams)."""
+    seams = np.unique(np.sort(np.asarray(seams, np.int64).reshape(-1, 2), 1), axis=0)
+    w = np.array([n, 1])
+    bkey = np.unique(np.sort(np.asarray(base, np.int64).reshape(-1, 2), 1) @ w)
+    skey = seams @ w
+    keep = np.ones(len(seams), bool)
+    extra = ~np.isin(skey, bkey)
+    if not extra.any():
+        return cut, uvc, seams
+    # the two triangles beside every split seam edge, and the pieces they are in
+    H = np.stack([F, np.roll(F, -1, 1)], 2).reshape(-1, 2)
+    hkey = np.sort(H, 1) @ w
+    hit = np.isin(hkey, skey[extra])
+    order = np.argsort(hkey[hit], kind='stable')
+    hk, hf = hkey[hit][order], np.repeat(np.arange(len(F)), 3)[hit][order]
+    same = np.nonzero(hk[:-1] == hk[1:])[0]
+    ek, fa, fb = hk[same], cut.face_island[hf[same]], cut.face_island[hf[same + 1]]
+    pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands)
+    cross = np.array([c for c, _, _ in pieces])
+    loops = {i: list(lp) for i, (_, _, lp) in enumerate(pieces)}
+    lab = np.arange(cut.n_islands)
+    failed = set()
+    changed = True
+    while changed:
+        changed = False
+        pa, pb = lab[fa], lab[fb]
+        two = (pa != pb) & np.isin(ek, skey[keep])
+        if not two.any():
+            break
+        pairs, inv, cnt = np.unique(np.stack([np.minimum(pa, pb)[two], np.maximum(pa, pb)[two]], 1),
+                                    axis=0, return_inverse=True, return_counts=True)
+        inv, keys = inv.ravel(), ek[two]
+        done = set()
+        for j in np.argsort(-cnt, kind='stable').tolist():
+            a, b = int(pairs[j, 0]), int(pairs[j, 1])
+            if a in done or b in done or (a, b) in failed:
+                continue
+            shared = keys[inv == j]
+            c = None
+            if _is_path(shared, n):
+                c = boundary_crossings(uvc, loops[a] + loops[b])
+            else:                            # glued along several paths: the union must still be a disk
+                trial = keep & ~np.isin(skey, shared)
+                sub = cut_along_seams(F[np.isin(lab[cut.face_island], [a, b])], n, seams[trial], strict=False)
+                if sub.n_islands == 1 and is_disk(sub.F, len(sub.vert_of)):
+                    c = boundary_crossings(uvc, loops[a] + loops[b])
+            if c is None or c > cross[a] + cross[b]:
+                failed.add((a, b))
+                continue
+            keep &= ~np.isin(skey, shared)
+            lab[lab == b] = a
+            cross[a] = c
+            loops[a] = loops[a] + loops.pop(b)
+            failed = {p for p in failed if a not in p}
+            done.update((a, b))
+            changed = True
+    if keep.all():
+        return cut, uvc, seams
+    seams = seams[keep]
+    new = cut_along_seams(F, n, seams)
+    uv2 = np.zeros((len(new.vert_of), 2))
+    uv2[new.F.ravel()] = uvc[cut.F.ravel()]
+    return new, uv2, seams
 
 
 def _split_nonmanifold(V, F):
