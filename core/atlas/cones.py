@@ -71,6 +71,10 @@ CORRECTIONS = 2                    # fixed-point steps of the angles for the exa
 MAX_SPLITS = 10                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
 CORNER_MARGIN = 0.15              # a cone's corners are kept this far below pi (rad): kappa_floor
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
+SPARSE_LAMBDA = 0.1                # the L2 start's penalty weight (times 1/n; sparse_curvature)
+SPARSE_ITERS = 15                  # reweighting rounds of the L2 start
+SPARSE_POOL = 3                    # the L2 start places SPARSE_POOL times the cones, then thins them
+MOVED = 2                          # with a fixed budget, cone moves refine the best MOVED placements
 
 
 @dataclass
@@ -457,6 +461,110 @@ def _screen(system, others, ko, cand):
     return _batch_spread(system.F, system.A, U)
 
 
+def sparse_curvature(system, lam=SPARSE_LAMBDA, iters=SPARSE_ITERS, eps=(1.0, 1e-3)):
+    """The L2 start (docs/cones.md, "Placement"): a curvature ``kappa`` (n,) on all vertices that
+    keeps the area-weighted spread of ``u`` small and is nearly sparse. Minimises
+    ``sum_i a_i u_i^2 + lam/n sum_i w_i kappa_i^2`` with ``kappa = L u + Omega`` (so the sum rule holds
+    by construction; ``a_i`` the vertex areas normalised to sum 1, ``u_B = 0`` and no penalty on a
+    boundary), reweighted ``iters`` times with ``w_i = 1/(|kappa_i| + e)^2`` (a log/L0-like penalty,
+    ``e`` from ``eps[0]`` down to ``eps[1]`` geometrically): each round one sparse solve of
+    ``(diag a + lam/n L W L) u = -lam/n L W Omega`` on the free vertices. Returns (u (n,), kappa (n,))."""
+    import scipy.sparse as sp
+    n = system.n
+    a = system.vertex_area / system.vertex_area.sum()
+    L = system.L.tocsr()
+    free = ~system.boundary
+    idx = np.nonzero(free)[0]
+    w = free.astype(np.float64)
+    u = np.zeros(n)
+    kap = system.Omega.copy()
+    for it in range(iters):
+        e = eps[0] * (eps[1] / eps[0]) ** (it / max(1, iters - 1))
+        LW = L.T @ sp.diags(w * lam / n)
+        M = (sp.diags(a) + LW @ L).tocsr()[idx][:, idx].tocsc()
+        u[idx] = Factor(M).solve(-(LW @ system.Omega)[idx])
+        kap = L @ u + system.Omega
+        w = np.where(free, 1.0 / (np.abs(kap) + e) ** 2, 0.0)
+    return u, kap
+
+
+def _peaks(system, kap, count, depth=2):
+    """``count`` vertices (list) where the curvature ``kap`` (n,) concentrates: the largest
+    ``|kappa|`` summed over the one-ring, each pick blocking its ``depth``-ring."""
+    system.rings([0])
+    ring = kap + system._adj @ kap
+    ok = system.eligible.copy()
+    S = []
+    for _ in range(count):
+        idx = np.nonzero(ok)[0]
+        if not len(idx):
+            break
+        v = int(idx[np.argmax(np.abs(ring[idx]))])
+        S.append(v)
+        ok &= ~system.rings([v], depth)
+    return S
+
+
+def _screen_removals(system, S):
+    """Approximate spread (k,) of the cones ``S`` (list) without each one in turn: the area-L2 angles of
+    the rest, without bounds, solved as a stack of KKT systems of size about k (the removed cone's
+    angle held at 0). ``_score`` checks the best few."""
+    n, k = system.n, len(S)
+    w = system.vertex_area / system.vertex_area.sum()
+    G = system.columns(S)
+    P = np.c_[G, -np.ones(n)]
+    M = P.T @ (w[:, None] * P)
+    g = P.T @ (w * system.u0)
+    size = k + 1 + (1 if system.needs_sum else 0)
+    K = np.zeros((k, size, size))
+    K[:, :k + 1, :k + 1] = M
+    rhs = np.zeros((k, size))
+    rhs[:, :k + 1] = -g
+    if system.needs_sum:
+        K[:, :k, -1] = 1.0
+        K[:, -1, :k] = 1.0
+        rhs[:, -1] = system.total
+    i = np.arange(k)
+    K[i, i, :] = 0.0
+    K[i, :, i] = 0.0
+    K[i, i, i] = 1.0
+    rhs[i, i] = 0.0
+    K[:, np.arange(size), np.arange(size)] += 1e-12 * np.abs(K).max()
+    try:
+        x = np.linalg.solve(K, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return np.zeros(k)
+    U = system.u0[:, None] + G @ x[:, :k].T
+    return _batch_spread(system.F, system.A, U)
+
+
+def eliminate(system, S, count, target_ratio=None, verify=None, report=None):
+    """Backward elimination: drop cones from ``S`` (list) one at a time, the one whose removal keeps
+    the best spread (screened in one batch, ``_screen_removals``; the ``verify`` best scored exactly by
+    ``_score``), down to ``count`` cones; with ``target_ratio``, further while the spread stays at or
+    above it. Returns (S list, kappa (k,), spread)."""
+    S = list(S)
+    verify = VERIFY if verify is None else verify
+    best, kap = _score(system, S)
+    start = len(S)
+    while len(S) > 3:
+        if len(S) <= count and not (target_ratio is not None and best >= target_ratio):
+            break
+        if report:
+            report((start - len(S)) / max(1, start - count), "thinning the cones")
+        approx = _screen_removals(system, S)
+        trial = None
+        for i in np.argsort(-approx)[:verify].tolist():
+            T = S[:i] + S[i + 1:]
+            sc, kk = _score(system, T)
+            if trial is None or sc > trial[0]:
+                trial = (sc, T, kk)
+        if len(S) <= count and trial[0] < target_ratio:
+            break
+        best, S, kap = trial
+    return S, kap, best
+
+
 def move_cones(system, S, kap, best, radius=3, sweeps=2, verify=None, far=0, report=None):
     """Local search over the ``radius``-ring of each cone (MovingCones-style moves, scored by the
     area-weighted 1%/99% spread of the per-triangle scale with the area-L2 angles re-solved):
@@ -499,7 +607,7 @@ def move_cones(system, S, kap, best, radius=3, sweeps=2, verify=None, far=0, rep
 
 
 def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None, candidates=None,
-                bounds=None):
+                bounds=None, sparse=True):
     """Cone placement: greedy runs under each set of curvature bounds, refined by cone moves over
     k-rings (docs/cones.md, "Placement").
 
@@ -513,8 +621,12 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
        cones, else the better spread (``_score``), is kept.
     2. Both greedy runs under each of ``bounds`` (default ``(L2_BOUNDS, WIDE_BOUNDS)``: the area-L2
        angles' curvature range; neither range wins on every mesh, so both are tried).
-    3. ``sweeps`` passes of cone moves (``move_cones``, ``MOVE_RADIUS``-rings): on every bound set's
-       result with a fixed budget (``target_ratio`` None), on the better one only otherwise (time).
+    3. ``sparse``: the L2 start under each of ``bounds``: ``SPARSE_POOL`` times the greedy's cone count
+       placed where a nearly sparse curvature concentrates (``sparse_curvature``, ``_peaks``), thinned
+       by backward elimination (``eliminate``) to that count (with a target, further while the spread
+       stays at or above it).
+    4. ``sweeps`` passes of cone moves (``move_cones``, ``MOVE_RADIUS``-rings): on the ``MOVED`` best
+       results with a fixed budget (``target_ratio`` None), on the best one only otherwise (time).
     Why the area-L2 angles score the placement and not L-inf or trimmed L-inf ones: on a fixed cone
     set the area-L2 angles are within 0.01 of a direct optimisation of the 1%/99% spread, the L-inf
     ones far below it (docs/cones.md); the gap to MovingCones is where the cones are.
@@ -544,8 +656,20 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
         if not S:
             return np.zeros(0, np.int64), np.zeros(0), history
         results.append([key, list(S), _score(system, S)[1], history, lim])
+    if sparse and system.n <= BIG_MESH:
+        # the L2 start: SPARSE_POOL times the cones where a nearly sparse curvature concentrates,
+        # thinned by backward elimination to the greedy's count (with a target: while it holds)
+        count = max_cones if target_ratio is None else max(len(r[1]) for r in results)
+        report(0.5, "sparse start")
+        _, kap_all = sparse_curvature(system)
+        pool = _peaks(system, kap_all, SPARSE_POOL * max(count, 3))
+        for lim in bounds:
+            system.bounds = lim
+            S, kap, sc = eliminate(system, pool, count, target_ratio)
+            hit = target_ratio is not None and sc >= target_ratio
+            results.append([(hit, -len(S) if hit else 0, sc), list(S), kap, [(len(S), sc)], lim])
     results.sort(key=lambda r: r[0], reverse=True)
-    for b, r in enumerate(results[:len(results) if target_ratio is None else 1]):
+    for b, r in enumerate(results[:min(len(results), MOVED) if target_ratio is None else 1]):
         if not sweeps:
             break
         system.bounds = r[4]
