@@ -490,7 +490,8 @@ def sparse_curvature(system, lam=SPARSE_LAMBDA, iters=SPARSE_ITERS, eps=(1.0, 1e
 
 def _peaks(system, kap, count, depth=2):
     """``count`` vertices (list) where the curvature ``kap`` (n,) concentrates: the largest
-    ``|kappa|`` summed over the one-ring, each pick blocking its ``depth``-ring."""
+    ``|kappa|`` summed over a one-ring, then the vertex of that ring with the largest ``kappa`` of the
+    same sign; each pick blocks its ``depth``-ring."""
     system.rings([0])
     ring = kap + system._adj @ kap
     ok = system.eligible.copy()
@@ -500,6 +501,8 @@ def _peaks(system, kap, count, depth=2):
         if not len(idx):
             break
         v = int(idx[np.argmax(np.abs(ring[idx]))])
+        near = np.nonzero(system.rings([v], 1) & ok)[0]
+        v = int(near[np.argmax(np.abs(kap[near]) * (np.sign(kap[near]) == np.sign(ring[v])))])
         S.append(v)
         ok &= ~system.rings([v], depth)
     return S
@@ -548,7 +551,7 @@ def eliminate(system, S, count, target_ratio=None, verify=None, report=None):
     best, kap = _score(system, S)
     start = len(S)
     while len(S) > 3:
-        if len(S) <= count and not (target_ratio is not None and best >= target_ratio):
+        if len(S) <= count and target_ratio is None:
             break
         if report:
             report((start - len(S)) / max(1, start - count), "thinning the cones")
