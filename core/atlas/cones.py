@@ -74,7 +74,6 @@ WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets spl
 SPARSE_LAMBDA = 0.1                # the L2 start's penalty weight (times 1/n; sparse_curvature)
 SPARSE_ITERS = 15                  # reweighting rounds of the L2 start
 SPARSE_POOL = 3                    # the L2 start places SPARSE_POOL times the cones, then thins them
-MOVED = 2                          # with a fixed budget, cone moves refine the best MOVED placements
 
 
 @dataclass
@@ -543,9 +542,10 @@ def _screen_removals(system, S):
 
 def eliminate(system, S, count, target_ratio=None, verify=None, report=None):
     """Backward elimination: drop cones from ``S`` (list) one at a time, the one whose removal keeps
-    the best spread (screened in one batch, ``_screen_removals``; the ``verify`` best scored exactly by
-    ``_score``), down to ``count`` cones; with ``target_ratio``, further while the spread stays at or
-    above it. Returns (S list, kappa (k,), spread)."""
+    the best spread (screened in one batch, ``_screen_removals``; within 3 of ``count`` the
+    ``verify`` best are scored exactly by ``_score``, above it only the screen's best), down to
+    ``count`` cones; with ``target_ratio``, further while the spread stays at or above it. Returns
+    (S list, kappa (k,), spread)."""
     S = list(S)
     verify = VERIFY if verify is None else verify
     best, kap = _score(system, S)
@@ -557,7 +557,8 @@ def eliminate(system, S, count, target_ratio=None, verify=None, report=None):
             report((start - len(S)) / max(1, start - count), "thinning the cones")
         approx = _screen_removals(system, S)
         trial = None
-        for i in np.argsort(-approx)[:verify].tolist():
+        # far above the count the screen alone decides (exact without active bounds)
+        for i in np.argsort(-approx)[:verify if len(S) <= count + 3 else 1].tolist():
             T = S[:i] + S[i + 1:]
             sc, kk = _score(system, T)
             if trial is None or sc > trial[0]:
@@ -659,20 +660,28 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
         if not S:
             return np.zeros(0, np.int64), np.zeros(0), history
         results.append([key, list(S), _score(system, S)[1], history, lim])
+    results.sort(key=lambda r: r[0], reverse=True)
+    moved = results[:1]
     if sparse and system.n <= BIG_MESH:
         # the L2 start: SPARSE_POOL times the cones where a nearly sparse curvature concentrates,
-        # thinned by backward elimination to the greedy's count (with a target: while it holds)
-        count = max_cones if target_ratio is None else max(len(r[1]) for r in results)
+        # thinned by backward elimination to the greedy's count (with a target: while it holds).
+        # Automatic mode (time): twice the cones, under the best greedy run's bounds only.
+        count = max_cones if target_ratio is None else len(results[0][1])
         report(0.5, "sparse start")
         _, kap_all = sparse_curvature(system)
-        pool = _peaks(system, kap_all, SPARSE_POOL * max(count, 3))
-        for lim in bounds:
+        pool = _peaks(system, kap_all, (SPARSE_POOL if target_ratio is None else 2) * max(count, 3))
+        sparse_runs = []
+        for lim in (bounds if target_ratio is None else [results[0][4]]):
             system.bounds = lim
             S, kap, sc = eliminate(system, pool, count, target_ratio)
             hit = target_ratio is not None and sc >= target_ratio
-            results.append([(hit, -len(S) if hit else 0, sc), list(S), kap, [(len(S), sc)], lim])
-    results.sort(key=lambda r: r[0], reverse=True)
-    for b, r in enumerate(results[:min(len(results), MOVED) if target_ratio is None else 1]):
+            sparse_runs.append([(hit, -len(S) if hit else 0, sc), list(S), kap, [(len(S), sc)], lim])
+        sparse_runs.sort(key=lambda r: r[0], reverse=True)
+        # fixed budget: the best greedy and the best L2 start are moved; automatic: the best of all
+        moved = results[:1] + sparse_runs[:1] if target_ratio is None else \
+            [max(results[0], sparse_runs[0], key=lambda r: r[0])]
+        results += sparse_runs
+    for b, r in enumerate(moved):
         if not sweeps:
             break
         system.bounds = r[4]
