@@ -73,6 +73,8 @@ CORNER_MARGIN = 0.15              # a cone's corners are kept this far below pi 
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 SPARSE_LAMBDA = 0.1                # the L2 start's penalty weight (times 1/n; sparse_curvature)
 SPARSE_ITERS = 15                  # reweighting rounds of the L2 start
+ALT_MARGIN = 0.02                  # another placement is laid out when its estimate beats the realised
+                                   # ratio of the best clean layout by this much
 SPARSE_POOL = 3                    # the L2 start places SPARSE_POOL times the cones, then thins them
 
 
@@ -694,6 +696,7 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
     key, S, kap, history, lim = results[0]
     system.bounds = lim
     system.alternates = [(np.array(r[1], np.int64), np.asarray(r[2], np.float64), r[4]) for r in results[1:]]
+    system.alternate_scores = [r[0][2] for r in results[1:]]
     S, kap = np.array(S, np.int64), np.asarray(kap, np.float64)
     return S, kap, history
 
@@ -1593,17 +1596,20 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
 
     t_lay = time.perf_counter()
     best, tried = lay_out(S, kappa)
-    if cones is None and n <= BIG_MESH and (best is None or not best[0][0]):
-        # the placement with the other curvature bounds, when the best one has no clean layout
-        for S2, k2, bounds in getattr(system, 'alternates', []):
-            system.bounds = bounds
-            S2, k2 = _drop_weak(system, S2, k2)
-            best2, tried2 = lay_out(S2, k2)
-            tried += [dict(c, angles=f"{c['angles']} (bounds {bounds})") for c in tried2]
-            if best2 is not None and (best is None or best2[0] > best[0]):
-                best, S = best2, S2
-            if best[0][0]:
-                break
+    alts = getattr(system, 'alternates', [])
+    for (S2, k2, bounds), est in zip(alts, getattr(system, 'alternate_scores', [np.inf] * len(alts))):
+        # the other placements (greedy / L2 start, other curvature bounds), while the best one has
+        # no clean layout or realises less than another placement's estimate (ALT_MARGIN below it)
+        if cones is not None or n > BIG_MESH:
+            break
+        if best is not None and best[0][0] and best[0][2] >= est - ALT_MARGIN:
+            continue
+        system.bounds = bounds
+        S2, k2 = _drop_weak(system, S2, k2)
+        best2, tried2 = lay_out(S2, k2)
+        tried += [dict(c, angles=f"{c['angles']} ({len(S2)} cones, bounds {bounds})") for c in tried2]
+        if best2 is not None and (best is None or best2[0] > best[0]):
+            best, S = best2, S2
     timings['layout'] = time.perf_counter() - t_lay - timings['cut']
     if best is None:
         raise ConformalError(f"no layout of the cut disk could be built: {tried[0]['error']}",
