@@ -697,6 +697,7 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
     system.bounds = lim
     system.alternates = [(np.array(r[1], np.int64), np.asarray(r[2], np.float64), r[4]) for r in results[1:]]
     system.alternate_scores = [r[0][2] for r in results[1:]]
+    system.alternate_moved = [any(r is q for q in moved) or not sweeps for r in results[1:]]
     S, kap = np.array(S, np.int64), np.asarray(kap, np.float64)
     return S, kap, history
 
@@ -1597,7 +1598,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     t_lay = time.perf_counter()
     best, tried = lay_out(S, kappa)
     alts = getattr(system, 'alternates', [])
-    for (S2, k2, bounds), est in zip(alts, getattr(system, 'alternate_scores', [np.inf] * len(alts))):
+    for j, ((S2, k2, bounds), est) in enumerate(zip(alts, getattr(system, 'alternate_scores',
+                                                                 [np.inf] * len(alts)))):
         # the other placements (greedy / L2 start, other curvature bounds), while the best one has
         # no clean layout or realises less than another placement's estimate (ALT_MARGIN below it)
         if cones is not None or n > BIG_MESH:
@@ -1605,6 +1607,10 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         if best is not None and best[0][0] and best[0][2] >= est - ALT_MARGIN:
             continue
         system.bounds = bounds
+        if not system.alternate_moved[j]:
+            # (automatic mode: only the best placement was moved; this one is moved now)
+            S2, k2, _, _ = move_cones(system, list(S2), k2, est, radius=MOVE_RADIUS, sweeps=sweeps)
+            S2 = np.array(S2, np.int64)
         S2, k2 = _drop_weak(system, S2, k2)
         best2, tried2 = lay_out(S2, k2)
         tried += [dict(c, angles=f"{c['angles']} ({len(S2)} cones, bounds {bounds})") for c in tried2]
