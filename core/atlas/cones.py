@@ -1601,10 +1601,12 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     for j, ((S2, k2, bounds), est) in enumerate(zip(alts, getattr(system, 'alternate_scores',
                                                                  [np.inf] * len(alts)))):
         # the other placements (greedy / L2 start, other curvature bounds), while the best one has
-        # no clean layout or realises less than another placement's estimate (ALT_MARGIN below it)
+        # no clean layout, realises less than another placement's estimate (ALT_MARGIN below it),
+        # or misses the target that another placement's estimate reaches
         if cones is not None or n > BIG_MESH:
             break
-        if best is not None and best[0][0] and best[0][2] >= est - ALT_MARGIN:
+        missed = target_ratio is not None and best is not None and best[0][2] < target_ratio <= est
+        if best is not None and best[0][0] and best[0][2] >= est - ALT_MARGIN and not missed:
             continue
         system.bounds = bounds
         if not system.alternate_moved[j]:
