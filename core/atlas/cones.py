@@ -15,8 +15,9 @@ Pipeline of ``cone_unwrap``:
 1. placement (``place_cones``): a look-ahead greedy (the most extreme vertices of ``u`` screened in
    one batch, the best scored by the area-weighted 1%/99% spread of the per-triangle scale with
    bounded area-L2 angles, ``ConeSystem.l2_angles``) and BFF's greedy, each under two sets of
-   curvature bounds (``L2_BOUNDS``, ``WIDE_BOUNDS``); then cone moves over 3-rings (``move_cones``).
-   ``L`` is the intrinsic Delaunay Laplacian.
+   curvature bounds (``L2_BOUNDS``, ``WIDE_BOUNDS``), and the L2 start (a nearly sparse curvature,
+   ``sparse_curvature``, its peaks thinned by backward elimination, ``eliminate``); then cone moves
+   over 3-rings (``move_cones``). ``L`` is the intrinsic Delaunay Laplacian.
 2. cut graph (``core.atlas.cutgraph.cut_graph``): 2g homology loops plus a short tree through the
    cones and the boundary, pruned and straightened. A wedge over ``2*pi`` (a negative cone) gets a
    new branch through its middle (``through_corner``).
@@ -28,7 +29,9 @@ Pipeline of ``cone_unwrap``:
    in the plane; if Newton fails, BFF-style: the closed-surface ``u`` gives the boundary lengths
    ``exp((u_i+u_j)/2) l_ij`` and turning angles ``k + (L u)_B``, the polygon is closed with a length
    change shared by both copies of every seam edge, and extended harmonically. An overlapping layout
-   is split into charts (``split_overlaps``).
+   is split into charts (``split_overlaps``) and glued back where the pieces do not overlap
+   (``merge_charts``). Other placements are laid out too when the best one realises clearly less
+   than their estimate (``ALT_MARGIN``).
 4. measures per triangle (``core.mesh.measures``) and overlap (boundary self-crossings).
 """
 import time
