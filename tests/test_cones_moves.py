@@ -61,12 +61,17 @@ def test_placement_keeps_its_bounds_and_the_alternate():
     lo = np.maximum(sy.bounds[0], sy.kappa_floor[S])
     assert (kap >= lo - 1e-9).all() and (kap <= sy.bounds[1] + 1e-9).all()
     assert abs(kap.sum() - 4 * np.pi) < 1e-9
-    (S_alt, kap_alt, b_alt), = sy.alternates
-    assert b_alt != sy.bounds and len(S_alt) == len(kap_alt)
-    # the kept run scores at least the other one (both scored under their own bounds)
+    # the other runs: greedy and the L2 start under both bound sets, less the kept one
+    assert len(sy.alternates) == 3
+    assert any(b_alt != sy.bounds for _, _, b_alt in sy.alternates)
+    # the kept run scores at least every other one (each scored under its own bounds)
     assert hist[-1][1] == _score(sy, list(S))[0]
-    sy.bounds = b_alt
-    assert _score(sy, list(S_alt))[0] <= hist[-1][1] + 1e-12
+    kept = sy.bounds
+    for S_alt, kap_alt, b_alt in sy.alternates:
+        assert len(S_alt) == len(kap_alt) == 6
+        sy.bounds = b_alt
+        assert _score(sy, list(S_alt))[0] <= hist[-1][1] + 1e-12
+    sy.bounds = kept
 
 
 def test_cones_next_to_a_flipped_triangle_are_found():

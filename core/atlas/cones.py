@@ -15,8 +15,9 @@ Pipeline of ``cone_unwrap``:
 1. placement (``place_cones``): a look-ahead greedy (the most extreme vertices of ``u`` screened in
    one batch, the best scored by the area-weighted 1%/99% spread of the per-triangle scale with
    bounded area-L2 angles, ``ConeSystem.l2_angles``) and BFF's greedy, each under two sets of
-   curvature bounds (``L2_BOUNDS``, ``WIDE_BOUNDS``); then cone moves over 3-rings (``move_cones``).
-   ``L`` is the intrinsic Delaunay Laplacian.
+   curvature bounds (``L2_BOUNDS``, ``WIDE_BOUNDS``), and the L2 start (a nearly sparse curvature,
+   ``sparse_curvature``, its peaks thinned by backward elimination, ``eliminate``); then cone moves
+   over 3-rings (``move_cones``). ``L`` is the intrinsic Delaunay Laplacian.
 2. cut graph (``core.atlas.cutgraph.cut_graph``): 2g homology loops plus a short tree through the
    cones and the boundary, pruned and straightened. A wedge over ``2*pi`` (a negative cone) gets a
    new branch through its middle (``through_corner``).
@@ -28,7 +29,9 @@ Pipeline of ``cone_unwrap``:
    in the plane; if Newton fails, BFF-style: the closed-surface ``u`` gives the boundary lengths
    ``exp((u_i+u_j)/2) l_ij`` and turning angles ``k + (L u)_B``, the polygon is closed with a length
    change shared by both copies of every seam edge, and extended harmonically. An overlapping layout
-   is split into charts (``split_overlaps``).
+   is split into charts (``split_overlaps``) and glued back where the pieces do not overlap
+   (``merge_charts``). Other placements are laid out too when the best one realises clearly less
+   than their estimate (``ALT_MARGIN``).
 4. measures per triangle (``core.mesh.measures``) and overlap (boundary self-crossings).
 """
 import time
@@ -71,6 +74,11 @@ CORRECTIONS = 2                    # fixed-point steps of the angles for the exa
 MAX_SPLITS = 10                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
 CORNER_MARGIN = 0.15              # a cone's corners are kept this far below pi (rad): kappa_floor
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
+SPARSE_LAMBDA = 0.1                # the L2 start's penalty weight (times 1/n; sparse_curvature)
+SPARSE_ITERS = 15                  # reweighting rounds of the L2 start
+ALT_MARGIN = 0.02                  # another placement is laid out when its estimate beats the realised
+                                   # ratio of the best clean layout by this much
+SPARSE_POOL = 3                    # the L2 start places SPARSE_POOL times the cones, then thins them
 
 
 @dataclass
@@ -457,6 +465,115 @@ def _screen(system, others, ko, cand):
     return _batch_spread(system.F, system.A, U)
 
 
+def sparse_curvature(system, lam=SPARSE_LAMBDA, iters=SPARSE_ITERS, eps=(1.0, 1e-3)):
+    """The L2 start (docs/cones.md, "Placement"): a curvature ``kappa`` (n,) on all vertices that
+    keeps the area-weighted spread of ``u`` small and is nearly sparse. Minimises
+    ``sum_i a_i u_i^2 + lam/n sum_i w_i kappa_i^2`` with ``kappa = L u + Omega`` (so the sum rule holds
+    by construction; ``a_i`` the vertex areas normalised to sum 1, ``u_B = 0`` and no penalty on a
+    boundary), reweighted ``iters`` times with ``w_i = 1/(|kappa_i| + e)^2`` (a log/L0-like penalty,
+    ``e`` from ``eps[0]`` down to ``eps[1]`` geometrically): each round one sparse solve of
+    ``(diag a + lam/n L W L) u = -lam/n L W Omega`` on the free vertices. Returns (u (n,), kappa (n,))."""
+    import scipy.sparse as sp
+    n = system.n
+    a = system.vertex_area / system.vertex_area.sum()
+    L = system.L.tocsr()
+    free = ~system.boundary
+    idx = np.nonzero(free)[0]
+    w = free.astype(np.float64)
+    u = np.zeros(n)
+    kap = system.Omega.copy()
+    for it in range(iters):
+        e = eps[0] * (eps[1] / eps[0]) ** (it / max(1, iters - 1))
+        LW = L.T @ sp.diags(w * lam / n)
+        M = (sp.diags(a) + LW @ L).tocsr()[idx][:, idx].tocsc()
+        u[idx] = Factor(M).solve(-(LW @ system.Omega)[idx])
+        kap = L @ u + system.Omega
+        w = np.where(free, 1.0 / (np.abs(kap) + e) ** 2, 0.0)
+    return u, kap
+
+
+def _peaks(system, kap, count, depth=2):
+    """``count`` vertices (list) where the curvature ``kap`` (n,) concentrates: the largest
+    ``|kappa|`` summed over a one-ring, then the vertex of that ring with the largest ``kappa`` of the
+    same sign; each pick blocks its ``depth``-ring."""
+    system.rings([0])
+    ring = kap + system._adj @ kap
+    ok = system.eligible.copy()
+    S = []
+    for _ in range(count):
+        idx = np.nonzero(ok)[0]
+        if not len(idx):
+            break
+        v = int(idx[np.argmax(np.abs(ring[idx]))])
+        near = np.nonzero(system.rings([v], 1) & ok)[0]
+        v = int(near[np.argmax(np.abs(kap[near]) * (np.sign(kap[near]) == np.sign(ring[v])))])
+        S.append(v)
+        ok &= ~system.rings([v], depth)
+    return S
+
+
+def _screen_removals(system, S):
+    """Approximate spread (k,) of the cones ``S`` (list) without each one in turn: the area-L2 angles of
+    the rest, without bounds, solved as a stack of KKT systems of size about k (the removed cone's
+    angle held at 0). ``_score`` checks the best few."""
+    n, k = system.n, len(S)
+    w = system.vertex_area / system.vertex_area.sum()
+    G = system.columns(S)
+    P = np.c_[G, -np.ones(n)]
+    M = P.T @ (w[:, None] * P)
+    g = P.T @ (w * system.u0)
+    size = k + 1 + (1 if system.needs_sum else 0)
+    K = np.zeros((k, size, size))
+    K[:, :k + 1, :k + 1] = M
+    rhs = np.zeros((k, size))
+    rhs[:, :k + 1] = -g
+    if system.needs_sum:
+        K[:, :k, -1] = 1.0
+        K[:, -1, :k] = 1.0
+        rhs[:, -1] = system.total
+    i = np.arange(k)
+    K[i, i, :] = 0.0
+    K[i, :, i] = 0.0
+    K[i, i, i] = 1.0
+    rhs[i, i] = 0.0
+    K[:, np.arange(size), np.arange(size)] += 1e-12 * np.abs(K).max()
+    try:
+        x = np.linalg.solve(K, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return np.zeros(k)
+    U = system.u0[:, None] + G @ x[:, :k].T
+    return _batch_spread(system.F, system.A, U)
+
+
+def eliminate(system, S, count, target_ratio=None, verify=None, report=None):
+    """Backward elimination: drop cones from ``S`` (list) one at a time, the one whose removal keeps
+    the best spread (screened in one batch, ``_screen_removals``; within 3 of ``count`` the
+    ``verify`` best are scored exactly by ``_score``, above it only the screen's best), down to
+    ``count`` cones; with ``target_ratio``, further while the spread stays at or above it. Returns
+    (S list, kappa (k,), spread)."""
+    S = list(S)
+    verify = VERIFY if verify is None else verify
+    best, kap = _score(system, S)
+    start = len(S)
+    while len(S) > 3:
+        if len(S) <= count and target_ratio is None:
+            break
+        if report:
+            report((start - len(S)) / max(1, start - count), "thinning the cones")
+        approx = _screen_removals(system, S)
+        trial = None
+        # far above the count the screen alone decides (exact without active bounds)
+        for i in np.argsort(-approx)[:verify if len(S) <= count + 3 else 1].tolist():
+            T = S[:i] + S[i + 1:]
+            sc, kk = _score(system, T)
+            if trial is None or sc > trial[0]:
+                trial = (sc, T, kk)
+        if len(S) <= count and trial[0] < target_ratio:
+            break
+        best, S, kap = trial
+    return S, kap, best
+
+
 def move_cones(system, S, kap, best, radius=3, sweeps=2, verify=None, far=0, report=None):
     """Local search over the ``radius``-ring of each cone (MovingCones-style moves, scored by the
     area-weighted 1%/99% spread of the per-triangle scale with the area-L2 angles re-solved):
@@ -499,7 +616,7 @@ def move_cones(system, S, kap, best, radius=3, sweeps=2, verify=None, far=0, rep
 
 
 def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None, candidates=None,
-                bounds=None):
+                bounds=None, sparse=True):
     """Cone placement: greedy runs under each set of curvature bounds, refined by cone moves over
     k-rings (docs/cones.md, "Placement").
 
@@ -513,8 +630,12 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
        cones, else the better spread (``_score``), is kept.
     2. Both greedy runs under each of ``bounds`` (default ``(L2_BOUNDS, WIDE_BOUNDS)``: the area-L2
        angles' curvature range; neither range wins on every mesh, so both are tried).
-    3. ``sweeps`` passes of cone moves (``move_cones``, ``MOVE_RADIUS``-rings): on every bound set's
-       result with a fixed budget (``target_ratio`` None), on the better one only otherwise (time).
+    3. ``sparse``: the L2 start under each of ``bounds``: ``SPARSE_POOL`` times the greedy's cone count
+       placed where a nearly sparse curvature concentrates (``sparse_curvature``, ``_peaks``), thinned
+       by backward elimination (``eliminate``) to that count (with a target, further while the spread
+       stays at or above it).
+    4. ``sweeps`` passes of cone moves (``move_cones``, ``MOVE_RADIUS``-rings): on the ``MOVED`` best
+       results with a fixed budget (``target_ratio`` None), on the best one only otherwise (time).
     Why the area-L2 angles score the placement and not L-inf or trimmed L-inf ones: on a fixed cone
     set the area-L2 angles are within 0.01 of a direct optimisation of the 1%/99% spread, the L-inf
     ones far below it (docs/cones.md); the gap to MovingCones is where the cones are.
@@ -545,7 +666,27 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
             return np.zeros(0, np.int64), np.zeros(0), history
         results.append([key, list(S), _score(system, S)[1], history, lim])
     results.sort(key=lambda r: r[0], reverse=True)
-    for b, r in enumerate(results[:len(results) if target_ratio is None else 1]):
+    moved = results[:1]
+    if sparse and system.n <= BIG_MESH:
+        # the L2 start: SPARSE_POOL times the cones where a nearly sparse curvature concentrates,
+        # thinned by backward elimination to the greedy's count (with a target: while it holds).
+        # Automatic mode (time): twice the cones, under the best greedy run's bounds only.
+        count = max_cones if target_ratio is None else len(results[0][1])
+        report(0.5, "sparse start")
+        _, kap_all = sparse_curvature(system)
+        pool = _peaks(system, kap_all, (SPARSE_POOL if target_ratio is None else 2) * max(count, 3))
+        sparse_runs = []
+        for lim in (bounds if target_ratio is None else [results[0][4]]):
+            system.bounds = lim
+            S, kap, sc = eliminate(system, pool, count, target_ratio)
+            hit = target_ratio is not None and sc >= target_ratio
+            sparse_runs.append([(hit, -len(S) if hit else 0, sc), list(S), kap, [(len(S), sc)], lim])
+        sparse_runs.sort(key=lambda r: r[0], reverse=True)
+        # fixed budget: the best greedy and the best L2 start are moved; automatic: the best of all
+        moved = results[:1] + sparse_runs[:1] if target_ratio is None else \
+            [max(results[0], sparse_runs[0], key=lambda r: r[0])]
+        results += sparse_runs
+    for b, r in enumerate(moved):
         if not sweeps:
             break
         system.bounds = r[4]
@@ -558,6 +699,8 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
     key, S, kap, history, lim = results[0]
     system.bounds = lim
     system.alternates = [(np.array(r[1], np.int64), np.asarray(r[2], np.float64), r[4]) for r in results[1:]]
+    system.alternate_scores = [r[0][2] for r in results[1:]]
+    system.alternate_moved = [any(r is q for q in moved) or not sweeps for r in results[1:]]
     S, kap = np.array(S, np.int64), np.asarray(kap, np.float64)
     return S, kap, history
 
@@ -1137,6 +1280,7 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
     its cut disk and layout; ``seams`` (k,2). Returns (cut, uvc, seams, crossings left, splits)."""
     n = len(V)
     splits = 0
+    base = np.asarray(seams, np.int64).reshape(-1, 2)
     while True:
         pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands)
         bad = [i for i, (c, _, _) in enumerate(pieces) if c]
@@ -1182,6 +1326,8 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
         uv2[new.F.ravel()] = uvc[cut.F.ravel()]
         cut, uvc = new, uv2
         splits += 1
+    if cut.n_islands > 1:
+        cut, uvc, seams = merge_charts(F, n, cut, uvc, seams, base)
     left = sum(c for c, _, _ in _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands))
     if cut.n_islands > 1:
         # move the pieces apart
@@ -1195,6 +1341,92 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
         off, _ = shelf_pack(size, 0.02 * np.sqrt((size[:, 0] * size[:, 1]).sum()))
         uvc = uvc - lo[vi] + off[vi]
     return cut, uvc, seams, int(left), splits
+
+
+def _is_path(keys, n):
+    """True if the edges ``keys`` (k,) (vertex pairs as ``a*n + b``) form one simple path."""
+    E = np.stack([keys // n, keys % n], 1)
+    verts, inv = np.unique(E, return_inverse=True)
+    if len(verts) != len(E) + 1 or np.bincount(inv.ravel()).max() > 2:
+        return False
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+    inv = inv.reshape(-1, 2)
+    g = sp.coo_matrix((np.ones(len(E)), (inv[:, 0], inv[:, 1])), shape=(len(verts),) * 2)
+    return connected_components(g, directed=False)[0] == 1
+
+
+def merge_charts(F, n, cut, uvc, seams, base):
+    """Glue charts of one flat layout back together where that does not overlap (docs/cones.md,
+    "Charts"). ``F`` (m,3) the working mesh with ``n`` vertices; ``cut`` (``islands.Cut``) and ``uvc``
+    (N,2) its pieces (disks), all laid out by the same flat metric and not yet moved apart, so two
+    pieces that share a split seam have equal coordinates on both sides of it; ``seams`` (k,2) the cut
+    with the splits; ``base`` (k0,2) the seams that must stay (the cut tree). Greedy: pairs of pieces
+    joined by split seams, the longest shared seam first, are glued when the shared seam is one path
+    (the union is a disk) and the union's boundary crosses itself no more often than the two pieces'
+    boundaries did. Returns (cut, uvc, seams)."""
+    seams = np.unique(np.sort(np.asarray(seams, np.int64).reshape(-1, 2), 1), axis=0)
+    w = np.array([n, 1])
+    bkey = np.unique(np.sort(np.asarray(base, np.int64).reshape(-1, 2), 1) @ w)
+    skey = seams @ w
+    keep = np.ones(len(seams), bool)
+    extra = ~np.isin(skey, bkey)
+    if not extra.any():
+        return cut, uvc, seams
+    # the two triangles beside every split seam edge, and the pieces they are in
+    H = np.stack([F, np.roll(F, -1, 1)], 2).reshape(-1, 2)
+    hkey = np.sort(H, 1) @ w
+    hit = np.isin(hkey, skey[extra])
+    order = np.argsort(hkey[hit], kind='stable')
+    hk, hf = hkey[hit][order], np.repeat(np.arange(len(F)), 3)[hit][order]
+    same = np.nonzero(hk[:-1] == hk[1:])[0]
+    ek, fa, fb = hk[same], cut.face_island[hf[same]], cut.face_island[hf[same + 1]]
+    pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands)
+    cross = np.array([c for c, _, _ in pieces])
+    loops = {i: list(lp) for i, (_, _, lp) in enumerate(pieces)}
+    lab = np.arange(cut.n_islands)
+    failed = set()
+    changed = True
+    while changed:
+        changed = False
+        pa, pb = lab[fa], lab[fb]
+        two = (pa != pb) & np.isin(ek, skey[keep])
+        if not two.any():
+            break
+        pairs, inv, cnt = np.unique(np.stack([np.minimum(pa, pb)[two], np.maximum(pa, pb)[two]], 1),
+                                    axis=0, return_inverse=True, return_counts=True)
+        inv, keys = inv.ravel(), ek[two]
+        done = set()
+        for j in np.argsort(-cnt, kind='stable').tolist():
+            a, b = int(pairs[j, 0]), int(pairs[j, 1])
+            if a in done or b in done or (a, b) in failed:
+                continue
+            shared = keys[inv == j]
+            c = None
+            if _is_path(shared, n):
+                c = boundary_crossings(uvc, loops[a] + loops[b])
+            else:                            # glued along several paths: the union must still be a disk
+                trial = keep & ~np.isin(skey, shared)
+                sub = cut_along_seams(F[np.isin(lab[cut.face_island], [a, b])], n, seams[trial], strict=False)
+                if sub.n_islands == 1 and is_disk(sub.F, len(sub.vert_of)):
+                    c = boundary_crossings(uvc, loops[a] + loops[b])
+            if c is None or c > cross[a] + cross[b]:
+                failed.add((a, b))
+                continue
+            keep &= ~np.isin(skey, shared)
+            lab[lab == b] = a
+            cross[a] = c
+            loops[a] = loops[a] + loops.pop(b)
+            failed = {p for p in failed if a not in p}
+            done.update((a, b))
+            changed = True
+    if keep.all():
+        return cut, uvc, seams
+    seams = seams[keep]
+    new = cut_along_seams(F, n, seams)
+    uv2 = np.zeros((len(new.vert_of), 2))
+    uv2[new.F.ravel()] = uvc[cut.F.ravel()]
+    return new, uv2, seams
 
 
 def _split_nonmanifold(V, F):
@@ -1368,17 +1600,27 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
 
     t_lay = time.perf_counter()
     best, tried = lay_out(S, kappa)
-    if cones is None and n <= BIG_MESH and (best is None or not best[0][0]):
-        # the placement with the other curvature bounds, when the best one has no clean layout
-        for S2, k2, bounds in getattr(system, 'alternates', []):
-            system.bounds = bounds
-            S2, k2 = _drop_weak(system, S2, k2)
-            best2, tried2 = lay_out(S2, k2)
-            tried += [dict(c, angles=f"{c['angles']} (bounds {bounds})") for c in tried2]
-            if best2 is not None and (best is None or best2[0] > best[0]):
-                best, S = best2, S2
-            if best[0][0]:
-                break
+    alts = getattr(system, 'alternates', [])
+    for j, ((S2, k2, bounds), est) in enumerate(zip(alts, getattr(system, 'alternate_scores',
+                                                                 [np.inf] * len(alts)))):
+        # the other placements (greedy / L2 start, other curvature bounds), while the best one has
+        # no clean layout, realises less than another placement's estimate (ALT_MARGIN below it),
+        # or misses the target that another placement's estimate reaches
+        if cones is not None or n > BIG_MESH:
+            break
+        missed = target_ratio is not None and best is not None and best[0][2] < target_ratio <= est
+        if best is not None and best[0][0] and best[0][2] >= est - ALT_MARGIN and not missed:
+            continue
+        system.bounds = bounds
+        if not system.alternate_moved[j]:
+            # (automatic mode: only the best placement was moved; this one is moved now)
+            S2, k2, _, _ = move_cones(system, list(S2), k2, est, radius=MOVE_RADIUS, sweeps=sweeps)
+            S2 = np.array(S2, np.int64)
+        S2, k2 = _drop_weak(system, S2, k2)
+        best2, tried2 = lay_out(S2, k2)
+        tried += [dict(c, angles=f"{c['angles']} ({len(S2)} cones, bounds {bounds})") for c in tried2]
+        if best2 is not None and (best is None or best2[0] > best[0]):
+            best, S = best2, S2
     timings['layout'] = time.perf_counter() - t_lay - timings['cut']
     if best is None:
         raise ConformalError(f"no layout of the cut disk could be built: {tried[0]['error']}",
