@@ -263,6 +263,16 @@ def anchor_runs(V, F, sets, post=lambda d: d):
     return out
 
 
+def table_row(mesh, V, F, method, grid, per, setup, query, viol, extra=None):
+    """One result row: ``per`` {set: (mean, max) relative error}, ``viol`` [below Euclid, above edges]."""
+    row = {'mesh': mesh, 'verts': len(V), 'tris': len(F), 'method': method, 'grid': grid,
+           'per_set': per, 'mean': float(np.mean([v[0] for v in per.values()])),
+           'worst_mean': max(v[0] for v in per.values()), 'max': max(v[1] for v in per.values()),
+           'setup': setup, 'query': query, 'below_euclid': viol[0], 'above_edges': viol[1]}
+    row.update(extra or {})
+    return row
+
+
 def bounds_violations(d, Vs, src, upper, keep):
     """Vertices (count) below the 3D distance to the nearest source, and above the edge-graph
     distance ``upper`` by more than 0.1 %, among ``keep``."""
@@ -322,11 +332,7 @@ def run_mesh(name, grids, rows, calib, plot, sphere=False):
             b, a = bounds_violations(d, Vs, sets[k], upper[k], kk)
             viol[0] += b
             viol[1] += a
-        row = {'mesh': name, 'verts': len(V), 'tris': len(F), 'method': method, 'grid': grid,
-               'per_set': per, 'mean': float(np.mean([v[0] for v in per.values()])),
-               'worst_mean': max(v[0] for v in per.values()), 'max': max(v[1] for v in per.values()),
-               'setup': setup, 'query': query, 'below_euclid': viol[0], 'above_edges': viol[1]}
-        row.update(extra or {})
+        row = table_row(name, V, F, method, grid, per, setup, query, viol, extra)
         rows.append(row)
         results[label] = row
         return row
@@ -416,11 +422,7 @@ def run_sphere(name, V, F, rows, plot):
             b, a = bounds_violations(dists[k], V, src, up, kk)
             viol[0] += b
             viol[1] += a
-        row = {'mesh': name + ' (sphere)', 'verts': len(V), 'tris': len(F), 'method': label, 'grid': '-',
-               'per_set': per, 'mean': float(np.mean([v[0] for v in per.values()])),
-               'worst_mean': max(v[0] for v in per.values()), 'max': max(v[1] for v in per.values()),
-               'setup': setup, 'query': query, 'below_euclid': viol[0], 'above_edges': viol[1]}
-        row.update(extra or {})
+        row = table_row(name + ' (sphere)', V, F, label, '-', per, setup, query, viol, extra)
         rows.append(row)
         results[label] = row
 
