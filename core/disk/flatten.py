@@ -246,10 +246,10 @@ class DiskSystem:
         return self.extend(self.boundary_curve(u))
 
 
-def normalise_uv(V, F, uv, fit='true_scale', area=None):
-    """Centre, rotate to principal axes and scale a UV map (n,2). ``true_scale``: total UV area equals
-    total 3D area (``area``, the sum of the triangles' areas, if the caller has it). ``unit_square``:
-    fit into [0,1]^2 keeping the aspect ratio."""
+def normalise_uv(F, uv, area, fit='true_scale'):
+    """Centre, rotate to principal axes and scale a UV map (n,2) of the triangles ``F`` (m,3).
+    ``true_scale``: total UV area equals ``area``, the triangles' total 3D area (squared mesh units).
+    ``unit_square``: fit into [0,1]^2 keeping the aspect ratio."""
     if fit not in FIT_MODES:
         raise ConformalError(f"unknown fit {fit!r}: use one of {', '.join(FIT_MODES)}")
     W = uv[F]
@@ -269,7 +269,7 @@ def normalise_uv(V, F, uv, fit='true_scale', area=None):
         R[:, 1] *= -1
     uv = uv @ R
     if fit == 'true_scale':
-        return uv * np.sqrt((face_areas(V, F).sum() if area is None else area) / a.sum())
+        return uv * np.sqrt(area / a.sum())
     lo, hi = uv.min(0), uv.max(0)
     size = (hi - lo).max()
     return (uv - lo) / size + (1 - (hi - lo) / size) / 2
@@ -407,7 +407,7 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
         job.result()                           # not wanted after all (the optimiser fell back)
     report_progress(0.95, 'measuring')
     Fm = F if mask is None else F[mask]
-    uv = normalise_uv(V, Fm, uv, fit, area=(system.A if mask is None else system.A[mask]).sum())
+    uv = normalise_uv(Fm, uv, (system.A if mask is None else system.A[mask]).sum(), fit)
     J, A = system.jacobians(uv), system.A
     measured, mu_real = measures_from_jacobians(*((J, A) if mask is None else (J[mask], A[mask])))
     report.update(measured)
