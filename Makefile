@@ -29,7 +29,7 @@ NP2 := .venv-numpy2
 $(NP2)/.installed: requirements.txt
 	$(PYTHON) -m venv $(NP2)
 	$(NP2)/bin/python -m pip install --quiet --upgrade pip
-	$(NP2)/bin/python -m pip install --quiet numpy==2.4.6 scipy==1.15.3 scikit-fmm==2025.6.23 cholespy==2.2.0 highspy==1.16.0 \
+	$(NP2)/bin/python -m pip install --quiet numpy==2.4.6 scipy==1.15.3 scikit-fmm==2025.6.23 cvxopt==1.3.2 highspy==1.16.0 \
 	    pytest==8.4.2 hypothesis==6.140.2
 	touch $(NP2)/.installed
 

@@ -54,8 +54,7 @@ def test_zip_layout_and_manifest(built_zip):
     assert manifest['platforms'] == ['linux-x64']
     wheels = sorted(os.path.basename(w) for w in manifest['wheels'])
     assert len(wheels) == 4
-    abi = f'{CP}-{CP}' if CP == 'cp311' else 'cp312-abi3'        # cholespy's stable-ABI wheel for 3.13
-    assert wheels[0].startswith(f'cholespy-2.2.0-{abi}-') and 'manylinux' in wheels[0]
+    assert wheels[0].startswith(f'cvxopt-1.3.2-{CP}-{CP}-') and 'manylinux' in wheels[0]
     assert wheels[1].startswith(f'highspy-1.16.0-{CP}-{CP}-') and 'manylinux' in wheels[1]
     assert wheels[2].startswith(f'scikit_fmm-2025.6.23-{CP}-{CP}-') and wheels[2].endswith('linux_x86_64.whl')
     assert wheels[3].startswith(f'scipy-1.15.3-{CP}-{CP}-') and 'manylinux' in wheels[3]
@@ -152,7 +151,7 @@ res['sphere_ret'] = sorted(bpy.ops.uv.conformal_sphere())
 res['sphere'] = json.loads(sph.data['conformal_sphere_report'])
 res['sphere_keys'] = [k.name for k in sph.data.shape_keys.key_blocks]
 res['modules'] = {m: getattr(sys.modules.get(m), '__file__', None) for m in ('scipy', 'skfmm')}
-# the CHOLMOD backend for large meshes comes from the zip's cholespy wheel
+# the CHOLMOD backend comes from the zip's cvxopt wheel
 import importlib
 res['cholmod'] = importlib.import_module(pkg[0] + '.core.mesh.solve').backend(10 ** 6)
 print('RESULT ' + json.dumps(res))
@@ -170,7 +169,7 @@ def test_blender_installs_zip_and_runs_operators(built_zip, tmp_path):
     assert res['colormap'] == 'PERCEPTUAL'
     # the zip's wheels were unpacked for this Python
     assert res['site'] == [f'python{PY}/site-packages']
-    assert {'scipy', 'skfmm', 'cholespy', 'highspy'} <= set(res['site_modules'])
+    assert {'scipy', 'skfmm', 'cvxopt', 'highspy'} <= set(res['site_modules'])
     assert res['cholmod'] == 'cholmod'
     assert res['flatten']['flips'] == 0 and res['flatten']['triangles'] == 2 * 12 * 12
     assert {'conformal_factor', 'conformal_factor_color', 'UVMap'} <= set(res['flatten_attrs'])

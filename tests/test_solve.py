@@ -1,4 +1,4 @@
-"""The sparse solve layer (core.mesh.solve: CHOLMOD through cholespy, SuperLU fallback) and the
+"""The sparse solve layer (core.mesh.solve: CHOLMOD through cvxopt, SuperLU fallback) and the
 ``uniform`` mode's fast paths on flat meshes (core.disk.uniform)."""
 import numpy as np
 import pytest
@@ -46,14 +46,16 @@ def maze(slots=6, rows=24, corridor=3, bend=0.0):
 
 
 def test_backend_by_size_and_cholmod_when_installed(monkeypatch):
-    import cholespy  # noqa: F401  (requirements.txt pins it; a platform without a wheel falls back)
+    import cvxopt  # noqa: F401  (requirements.txt pins it; a platform without a wheel falls back)
     monkeypatch.delenv('CONFORMAL_SOLVER', raising=False)
     assert solve.backend() == 'cholmod' and solve.backend(solve.CHOLMOD_MIN) == 'cholmod'
-    assert solve.backend(1000) == 'superlu'
-    assert solve.Factor(_interior_laplacian()).backend == 'superlu'
-    assert solve.Factor(_interior_laplacian(), method='cholmod').backend == 'cholmod'
+    assert solve.backend(solve.CHOLMOD_MIN - 1) == 'superlu'
+    small = _interior_laplacian(n=17)                      # 225 rows
+    assert solve.Factor(small).backend == 'superlu'
+    assert solve.Factor(small, method='cholmod').backend == 'cholmod'
+    assert solve.Factor(_interior_laplacian(n=41)).backend == 'cholmod'      # 1521 rows
     monkeypatch.setenv('CONFORMAL_SOLVER', 'cholmod')
-    assert solve.Factor(_interior_laplacian()).backend == 'cholmod'
+    assert solve.Factor(small).backend == 'cholmod'
 
 
 def test_forced_superlu(monkeypatch):
@@ -189,7 +191,8 @@ def test_fill_order_is_a_permutation_that_cuts_fill():
     # the nested dissection, far below the shuffled natural order and no worse than MMD's
     shuffle = np.random.default_rng(0).permutation(K.shape[0])
     Ks = K[shuffle][:, shuffle].tocsc()
-    nd = solve.Factor(Ks, order=solve.fill_order(V[inner][shuffle], Ks, min_size=0, leaf=16))
+    order = solve.fill_order(V[inner][shuffle], Ks, min_size=0, leaf=16)
+    nd = solve.Factor(Ks, method='superlu', order=order)
     mmd = solve.Factor(Ks, method='superlu')
     natural = sp.linalg.splu(Ks, permc_spec='NATURAL', diag_pivot_thresh=0.0,
                              options=dict(SymmetricMode=True))
@@ -202,6 +205,10 @@ def test_fill_order_is_a_permutation_that_cuts_fill():
     ref = sp.linalg.spsolve(Ks, B)
     assert np.abs(X - ref).max() < 1e-9 * np.abs(ref).max()
     assert np.allclose(nd.solve(B[:, 4]), X[:, 4], rtol=0, atol=1e-12 * np.abs(X).max())
+    # CHOLMOD takes the same order as its user ordering: the same solutions
+    chol = solve.Factor(Ks, method='cholmod', order=order)
+    assert chol.backend == 'cholmod' and chol.ordering == 'given'
+    assert np.abs(chol.solve(B) - ref).max() < 1e-9 * np.abs(ref).max()
 
 
 def test_sub_order_keeps_the_relative_order():
@@ -214,15 +221,16 @@ def test_sub_order_keeps_the_relative_order():
         solve.Factor(sp.identity(3, format='csc'), order=np.arange(4))
 
 
-def test_flatten_same_map_with_nested_dissection(monkeypatch):
+@pytest.mark.parametrize('method', solve.BACKENDS)
+def test_flatten_same_map_with_nested_dissection(monkeypatch, method):
     """The big-mesh path (one nested dissection order for both factorisations) gives the map of the
-    solver's own ordering."""
+    solver's own ordering, with either backend."""
     V, F = make_surface('ridge', 49)
-    monkeypatch.delenv('CONFORMAL_SOLVER', raising=False)
+    monkeypatch.setenv('CONFORMAL_SOLVER', method)
     a = flatten(V, F, boundary='area')
     monkeypatch.setattr(solve, 'ND_MIN', 100)
     b = flatten(V, F, boundary='area')
-    assert b.report['solver'] == 'superlu'
+    assert a.report['solver'] == b.report['solver'] == method
     assert np.abs(a.uv - b.uv).max() < 1e-9 * np.abs(a.uv).max()
     for key in ('mu_ratio', 'qc_mean', 'flips'):
         assert b.report[key] == pytest.approx(a.report[key], rel=1e-9)
@@ -233,7 +241,7 @@ def test_deferred_factor_in_turn_gives_the_same_map(monkeypatch):
     (FactorJob) while the first one's solves go on: the same map, and a singular matrix still raises
     ConformalError, from result()."""
     V, F = make_surface('ridge', 49)
-    monkeypatch.delenv('CONFORMAL_SOLVER', raising=False)
+    monkeypatch.setenv('CONFORMAL_SOLVER', 'superlu')          # the SuperLU path (CHOLMOD runs in turn)
     a = [flatten(V, F, boundary=mode, bound=False) for mode in ('area', 'uniform')]
     monkeypatch.setattr(solve, 'PARALLEL_MAX', 100)
     monkeypatch.setattr(solve, 'WORKERS', 2)

@@ -176,13 +176,14 @@ def fetch_wheels(wheel_dir, python='3.11', platforms=None, log=print):
 # Optional compiled helpers of the core, shipped where PyPI has their wheels; without them the core
 # falls back (fallback named in the log). Their wheels need newer platform tags than scipy's.
 OPTIONAL_WHEELS = {
-    'cholespy': dict(         # CHOLMOD, core.mesh.solve; one cp312-abi3 wheel serves Python 3.13
-        abi={'3.11': 'cp311-cp311', '3.13': 'cp312-abi3'},
+    'cvxopt': dict(           # CHOLMOD (supernodal, OpenBLAS) through cvxopt.cholmod, core.mesh.solve
+        abi={'3.11': 'cp311-cp311', '3.13': 'cp313-cp313'},
         fallback='SuperLU will be used',
-        tags={'linux-x64': ['manylinux_2_28_x86_64', 'manylinux_2_27_x86_64'],
+        # its cp313 macOS wheels need macOS 14 / 15, newer than Blender's minimum: not shipped there
+        tags={'linux-x64': ['manylinux_2_17_x86_64', 'manylinux2014_x86_64'],
               'windows-x64': ['win_amd64'],
-              'macos-arm64': ['macosx_11_0_arm64', 'macosx_12_0_arm64'],
-              'macos-x64': ['macosx_10_14_x86_64']}),
+              'macos-arm64': ['macosx_11_0_arm64'],
+              'macos-x64': ['macosx_10_9_x86_64']}),
     'highspy': dict(          # HiGHS's own binding: uniform's warm-started programs, core.disk.uniform
         abi={'3.11': 'cp311-cp311', '3.13': 'cp313-cp313'},
         fallback="scipy's linprog will be used (the same solver, from scratch each round)",

@@ -2,16 +2,14 @@
 
 Two backends (docs/scale.md):
 
-- ``cholmod``: a sparse Cholesky factorisation ``K = L L^T`` by CHOLMOD (nested dissection ordering)
-  through the small ``cholespy`` binding, when its wheel is installed. Used for matrices of at
-  least ``CHOLMOD_MIN`` rows (about 600k triangles): it scales as a 2D nested dissection should
-  (measured 2.6x the factor time from 1M to 2M triangles, SuperLU 5.3x) in a third of SuperLU's
-  factor memory.
-- ``superlu``: scipy's SuperLU in symmetric mode, always available. Used below ``CHOLMOD_MIN``
-  (measured faster there, and it releases the GIL, so two factorisations run on two cores), where
-  cholespy is missing, for a matrix that is not numerically symmetric, and for one that CHOLMOD
+- ``cholmod``: CHOLMOD's supernodal sparse Cholesky factorisation ``K = L L^T`` with an optimised
+  BLAS, through cvxopt's ``cholmod`` module, when its wheel is installed. Used from ``CHOLMOD_MIN``
+  rows: measured 1.7-2.7x faster than SuperLU from 8k to 100k triangles and 2.5-3x at 1M-2M
+  (docs/scale.md), in about half of SuperLU's factor memory (one triangle instead of L and U).
+- ``superlu``: scipy's SuperLU in symmetric mode, always available. Used below ``CHOLMOD_MIN``,
+  where cvxopt is missing, for a matrix that is not numerically symmetric, and for one that CHOLMOD
   finds not positive definite (a Laplacian of a mesh with very obtuse triangles can be indefinite
-  yet nonsingular).
+  yet nonsingular). It releases the GIL, so two of its factorisations can run on two cores.
 
 ``backend(size)`` names the backend a new factorisation of a ``size`` x ``size`` matrix uses;
 ``Factor.backend`` the one that ran. ``CONFORMAL_SOLVER=superlu`` or ``=cholmod`` in the environment
@@ -19,10 +17,10 @@ forces one for all sizes (for comparisons).
 
 Big meshes: a caller that knows where its unknowns lie (vertex positions) passes a fill-reducing
 ``order`` from ``fill_order`` (nested dissection by recursive coordinate bisection, separators last;
-docs/scale.md). SuperLU then factors the permuted matrix in that order ('NATURAL'), which measured
-about half of CHOLMOD's or SuperLU-with-MMD's factor time at 1M triangles, and the factorisations run
-on two threads. ``sub_order`` restricts one order of all vertices to a submatrix (interior vertices,
-all but one vertex), so one ordering serves every matrix of a mesh.
+docs/scale.md). CHOLMOD takes it as its user ordering (and keeps it unless its own is better);
+SuperLU factors the permuted matrix in that order ('NATURAL'), about half of its time with MMD at 1M
+triangles. ``sub_order`` restricts one order of all vertices to a submatrix (interior vertices, all
+but one vertex), so one ordering serves every matrix of a mesh.
 """
 import os
 import threading
@@ -35,15 +33,17 @@ import scipy.sparse.linalg as spla
 from ..errors import ConformalError
 
 try:                                     # the optional compiled Cholesky (a pinned requirement)
-    import cholespy as _cholespy
+    from cvxopt import cholmod as _cholmod
+    from cvxopt import matrix as _cvx_matrix
+    from cvxopt import spmatrix as _cvx_spmatrix
 except ImportError:                      # pragma: no cover - depends on the platform's wheels
-    _cholespy = None
+    _cholmod = None
 
 WORKERS = min(2, os.cpu_count() or 1)
 BACKENDS = ('cholmod', 'superlu')
 SPLIT_RHS = 8           # SuperLU: split at least this many right-hand sides over WORKERS threads
 BLOCK_BYTES = 16 << 20  # SuperLU: right-hand sides are solved in column blocks of at most this size
-CHOLMOD_MIN = 300_000   # rows from which CHOLMOD is used (a disk of ~600k triangles; docs/scale.md)
+CHOLMOD_MIN = 1_000     # rows from which CHOLMOD is used (below, its fixed cost of ~0.5 ms dominates)
 PARALLEL_MAX = 400_000  # total rows up to which factor_all runs SuperLU factorisations at once (memory)
 PARALLEL_MIN = 4_000    # total rows from which that pays (below, the threads cost more than they save)
 ND_MIN = 60_000         # rows from which fill_order computes a nested dissection order
@@ -53,9 +53,9 @@ _SYM_TOL = 1e-12        # relative asymmetry above which a matrix goes to SuperL
 
 def backend(size=None):
     """Name of the backend a new ``Factor`` of a ``size`` x ``size`` matrix uses: 'cholmod' or
-    'superlu'. Without ``size``: 'cholmod' if cholespy is installed (and not forced off)."""
+    'superlu'. Without ``size``: 'cholmod' if cvxopt is installed (and not forced off)."""
     forced = os.environ.get('CONFORMAL_SOLVER', '').strip().lower()
-    if _cholespy is None or forced == 'superlu':
+    if _cholmod is None or forced == 'superlu':
         return 'superlu'
     if forced == 'cholmod' or size is None or size >= CHOLMOD_MIN:
         return 'cholmod'
@@ -77,7 +77,7 @@ def factor_all(*matrices, orders=None, defer_last=False):
     orders = list(orders) if orders is not None else [None] * len(matrices)
     if len(orders) != len(matrices):
         raise ConformalError(f"{len(orders)} orders for {len(matrices)} matrices")
-    methods = [_method(K.shape[0], o) for K, o in zip(matrices, orders)]
+    methods = [backend(K.shape[0]) for K in matrices]
     rows = sum(K.shape[0] for K in matrices)
     in_turn = WORKERS < 2 or len(matrices) < 2 or 'cholmod' in methods
     if in_turn or not PARALLEL_MIN <= rows <= PARALLEL_MAX:
@@ -111,14 +111,6 @@ class FactorJob:
         if exc is not None:
             raise exc
         return factor
-
-
-def _method(size, order):
-    """The backend ``Factor`` chooses for a matrix of ``size`` rows with ``order`` (or None):
-    SuperLU in a given order unless CHOLMOD is forced."""
-    if order is not None and os.environ.get('CONFORMAL_SOLVER', '').strip().lower() != 'cholmod':
-        return 'superlu'
-    return backend(size)
 
 
 def fill_order(points, K, min_size=None, leaf=ND_LEAF):
@@ -222,40 +214,6 @@ def _is_symmetric(K):
     return D.nnz == 0 or np.abs(D.data).max() <= _SYM_TOL * np.abs(K.data).max()
 
 
-class _QuietStderr:
-    """Send the C-level stderr (file descriptor 2) to a temporary file for the duration and replay
-    it afterwards, unless ``drop`` is set: CHOLMOD prints its own warning when it meets a matrix
-    that is not positive definite, which we handle (SuperLU retry) and report ourselves."""
-
-    def __init__(self):
-        self.drop = False
-
-    def __enter__(self):
-        import tempfile
-        try:
-            self._saved = os.dup(2)
-            self._tmp = tempfile.TemporaryFile()
-            os.dup2(self._tmp.fileno(), 2)
-        except (OSError, ValueError):          # no usable fd 2 (e.g. some embedded interpreters)
-            self._saved = None
-        return self
-
-    def __exit__(self, *exc):
-        if self._saved is None:
-            return False
-        os.dup2(self._saved, 2)
-        os.close(self._saved)
-        try:
-            if not self.drop:
-                self._tmp.seek(0)
-                text = self._tmp.read()
-                if text:
-                    os.write(2, text)
-        finally:
-            self._tmp.close()
-        return False
-
-
 class Factor:
     """Factorisation of a sparse symmetric positive definite matrix ``K`` (k,k), computed once.
 
@@ -274,36 +232,40 @@ class Factor:
             order = np.asarray(order, np.int64)
             if order.shape != (K.shape[0],):
                 raise ConformalError(f"the order has {order.size} entries, the matrix {K.shape[0]} rows")
-        method = method or _method(K.shape[0], order)
+        method = method or backend(K.shape[0])
         if method not in BACKENDS:
             raise ConformalError(f"unknown solver backend {method!r}: use one of {', '.join(BACKENDS)}")
-        if method == 'cholmod' and _cholespy is None:
+        if method == 'cholmod' and _cholmod is None:
             method = 'superlu'
         self._chol = self._lu = None
         if method == 'cholmod' and K.shape[0] > 0 and _is_symmetric(K):
-            self._chol = self._cholmod(K)
+            self._chol = self._cholmod(K, order)
         if self._chol is None:
             if order is not None:
                 self._order = order
                 K = K[order][:, order].tocsc()
             self._lu = self._superlu(K, 'NATURAL' if order is not None else 'MMD_AT_PLUS_A')
         self.backend = 'cholmod' if self._chol is not None else 'superlu'
-        self.ordering = 'cholmod' if self._chol is not None else ('given' if order is not None else 'mmd')
+        self.ordering = ('given' if order is not None else 'cholmod') if self._chol is not None else \
+            ('given' if order is not None else 'mmd')
 
     @staticmethod
-    def _cholmod(K):
-        """CHOLMOD factor of the lower triangle of ``K``, or None if it is not positive definite."""
-        K = K.copy()
-        K.sum_duplicates()
-        K.sort_indices()
+    def _cholmod(K, order=None):
+        """CHOLMOD's factor of ``K`` (its lower triangle, in ``order`` if given), or None if ``K`` is
+        not positive definite or the binding refuses the arrays (then SuperLU factors it)."""
+        C = sp.tril(K, format='coo')
+        C.sum_duplicates()
         n = K.shape[0]
-        with _QuietStderr() as quiet:
-            try:
-                return _cholespy.CholeskySolverD(n, K.indptr.astype(np.int32), K.indices.astype(np.int32),
-                                                 np.ascontiguousarray(K.data), _cholespy.MatrixType.CSC)
-            except ValueError:                 # "Matrix is not positive definite!"
-                quiet.drop = True
-                return None
+        try:
+            A = _cvx_spmatrix(_cvx_matrix(np.ascontiguousarray(C.data, np.float64)), _cvx_matrix(
+                C.row.astype(np.int64)), _cvx_matrix(C.col.astype(np.int64)), (n, n))
+            del C
+            p = None if order is None else _cvx_matrix(np.asarray(order, np.int64))
+            fac = _cholmod.symbolic(A) if p is None else _cholmod.symbolic(A, p=p)
+            _cholmod.numeric(A, fac)           # CHOLMOD prints nothing here: it raises
+            return fac
+        except (ArithmeticError, ValueError, TypeError):    # not positive definite, or the arrays
+            return None
 
     @staticmethod
     def _superlu(K, permc_spec):
@@ -315,10 +277,11 @@ class Factor:
                                  "triangles or a disconnected piece", 'degenerate') from None
 
     def _solve_cholmod(self, b):
-        b = np.ascontiguousarray(b)
-        x = np.empty_like(b)
-        self._chol.solve(b, x)
-        return x
+        """CHOLMOD's solve of (k,) or (k,r) ``b`` (cvxopt's dense matrices are column-major)."""
+        shape = b.shape
+        B = _cvx_matrix(np.ravel(b, order='F'), (shape[0], 1 if b.ndim == 1 else shape[1]))
+        _cholmod.solve(self._chol, B)
+        return np.array(B).reshape(shape)          # (k,r) from the column-major buffer, C-ordered copy
 
     def solve(self, b):
         """``K^-1 b`` for ``b`` (k,) or (k,r); float64 of the same shape."""
