@@ -48,6 +48,7 @@ def maze(slots=6, rows=24, corridor=3, bend=0.0):
 def test_backend_by_size_and_cholmod_when_installed(monkeypatch):
     import cvxopt  # noqa: F401  (requirements.txt pins it; a platform without a wheel falls back)
     monkeypatch.delenv('CONFORMAL_SOLVER', raising=False)
+    assert solve.BLAS_THREADS == 1                         # cvxopt's own OpenBLAS, found and limited
     assert solve.backend() == 'cholmod' and solve.backend(solve.CHOLMOD_MIN) == 'cholmod'
     assert solve.backend(solve.CHOLMOD_MIN - 1) == 'superlu'
     small = _interior_laplacian(n=17)                      # 225 rows

@@ -38,6 +38,34 @@ try:                                     # the optional compiled Cholesky (a pin
 except ImportError:                      # pragma: no cover - depends on the platform's wheels
     _cholmod = None
 
+
+def _cvxopt_blas_threads(n=1):
+    """Set the thread count of the OpenBLAS bundled in cvxopt's wheel (its own copy, used by nothing
+    else here) to ``n``; returns the count it reports after, or None where the library is not found.
+
+    CHOLMOD's supernodal kernels on 2D meshes are too small to gain from BLAS threads (factor CPU time
+    equals wall time), but OpenBLAS's threads spin while they wait: on a busy machine (Blender's own
+    threads, other processes) a 32-column solve measured 2.8x slower with them than without
+    (docs/scale.md)."""
+    import ctypes
+    import glob
+    import cvxopt
+    here = os.path.dirname(cvxopt.__file__)
+    for pattern in (os.path.join(here, os.pardir, 'cvxopt.libs', '*openblas*'),     # Linux wheels
+                    os.path.join(here, '.dylibs', '*openblas*'),                    # macOS
+                    os.path.join(here, '.libs', '*openblas*')):                      # Windows
+        for path in sorted(glob.glob(pattern)):
+            try:
+                lib = ctypes.CDLL(path)
+                lib.openblas_set_num_threads(int(n))
+                return int(lib.openblas_get_num_threads())
+            except (OSError, AttributeError):
+                continue
+    return None
+
+
+BLAS_THREADS = _cvxopt_blas_threads() if _cholmod is not None else None
+
 WORKERS = min(2, os.cpu_count() or 1)
 BACKENDS = ('cholmod', 'superlu')
 SPLIT_RHS = 8           # SuperLU: split at least this many right-hand sides over WORKERS threads
