@@ -28,6 +28,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from ..errors import ConformalError
 
@@ -297,9 +298,8 @@ class Factor:
     @staticmethod
     def _superlu(K, permc_spec):
         try:
-            from scipy.sparse.linalg import splu     # the fallback: its import (0.1 s) only when used
-            return splu(K, permc_spec=permc_spec, diag_pivot_thresh=0.0,
-                         options=dict(SymmetricMode=True))
+            return spla.splu(K, permc_spec=permc_spec, diag_pivot_thresh=0.0,
+                             options=dict(SymmetricMode=True))
         except RuntimeError as exc:
             raise ConformalError(f"the Laplacian is singular ({exc}): the mesh has degenerate "
                                  "triangles or a disconnected piece", 'degenerate') from None
