@@ -439,7 +439,10 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
             ref = u[S[0]] if S else np.median(u[system.eligible])
             S.append(int(idx[np.argmax(np.abs(u[idx] - ref))]))
             kap = system.dirichlet_angles(S)
-            best = face_spread(system.F, system.A, system.u_of(S, kap))
+            u = system.u_of(S, kap)
+            best = face_spread(system.F, system.A, u)
+            history.append((len(S), best))
+            continue
         u = system.u_of(S, kap)
         history.append((len(S), best))
     return S, history
@@ -1358,10 +1361,15 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
 def _piece_crossings(Fc, uvc, face_island, n_islands, segments=False):
     """Boundary self-crossings of every piece (island) of a cut layout: list of (count, segments
     (k,2) of split-vertex pairs, boundary loops) per piece."""
+    # one pass over all pieces: they share no split vertex, so the loops of the whole cut layout,
+    # grouped by piece, are each piece's own loops in the same order (longest first)
+    owner = np.full(len(uvc), -1, np.int64)
+    owner[Fc.ravel()] = np.repeat(face_island, 3)
+    by_piece = [[] for _ in range(n_islands)]
+    for lp in topology.boundary_loops(Fc, len(uvc)):
+        by_piece[owner[lp[0]]].append(lp)
     out = []
-    for i in range(n_islands):
-        Fi = Fc[face_island == i]
-        loops = topology.boundary_loops(Fi, len(uvc))
+    for loops in by_piece:
         cnt, seg = boundary_crossings(uvc, loops, return_segments=True)
         out.append((cnt, seg, loops))
     return out

@@ -202,13 +202,20 @@ def cut_graph(V, F, cones, root=None):
 
 def is_disk(F, n):
     """True if ``F`` (m,3) over ``n`` vertices (unused vertices allowed) is one connected piece with
-    one boundary loop and Euler characteristic 1."""
-    loops = topology.boundary_loops(F, n)
-    ncomp = connected_components(topology.vertex_adjacency(F, n), directed=False)[0]
+    one boundary loop and Euler characteristic 1. One sort of the edge keys (``topology.edge_table``)
+    gives the edge count and, on a manifold consistently oriented ``F``, the twins for the loops."""
+    F = np.asarray(F, np.int64)
+    E, counts, twin, same_way = topology.edge_table(F, n)
+    manifold = same_way == 0 and (counts <= 2).all()
+    loops = topology.boundary_loops(F, n, twin=twin if manifold else None)
+    if len(loops) != 1:
+        return False
     used = np.zeros(n, bool)
     used[F.ravel()] = True
-    ncomp -= int((~used).sum())
-    return len(loops) == 1 and ncomp == 1 and topology.euler_characteristic(F) == 1
+    if int(used.sum()) - len(E) + len(F) != 1:               # the Euler characteristic
+        return False
+    ncomp = connected_components(topology.vertex_adjacency(F, n), directed=False)[0]
+    return ncomp - int((~used).sum()) == 1
 
 
 def twig(edges, start, stop):
