@@ -1232,7 +1232,8 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
     kap_all = np.zeros(n)
     kap_all[np.asarray(cones, np.int64)] = kappa
     fixed = np.zeros(n, bool)
-    bl = topology.boundary_loops(F, n)
+    twin = _mesh_twins(F, n, cache)             # the working mesh's half-edge twins, for its cuts
+    bl = topology.boundary_loops(F, n, twin=twin)
     for lp in bl:
         fixed[lp] = True
     if not bl:
@@ -1240,9 +1241,10 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
     while True:
         cut = cut_along_seams(F, n, seams)
         Fc, vert_of = cut.F, cut.vert_of
-        if cut.n_islands != 1 or not is_disk(Fc, len(vert_of)):
+        twc = _cut_twins(Fc, twin)
+        if cut.n_islands != 1 or not is_disk(Fc, len(vert_of), twin=twc):
             raise ConformalError("the cut graph does not open the surface into a disk", 'bad_topology')
-        loop = topology.boundary_loops(Fc, len(vert_of))[0]
+        loop = topology.boundary_loops(Fc, len(vert_of), twin=twc)[0]
         Vc, uc = V[vert_of], u[vert_of]
         kt, lt, Lc = _boundary_data(Vc, Fc, loop, uc, vert_of, Lu, cache)
         wedge = np.pi - kt
@@ -1278,7 +1280,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         new = through_corner(V, F, seams, c, int(vert_of[w0]), stop, protect)
         if new is not None:
             c2 = cut_along_seams(F, n, new)
-            if c2.n_islands != 1 or not is_disk(c2.F, len(c2.vert_of)):
+            if c2.n_islands != 1 or not is_disk(c2.F, len(c2.vert_of), twin=_cut_twins(c2.F, twin)):
                 new = None
         if new is None:
             new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect)
@@ -1334,7 +1336,8 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
     crossings = boundary_crossings(uvc, [loop])
     splits = 0
     if crossings and split:
-        cut, uvc, seams, crossings, splits = split_overlaps(Vw, Fw, cut, uvc, seams)
+        cut, uvc, seams, crossings, splits = split_overlaps(Vw, Fw, cut, uvc, seams,
+                                                            twin=_mesh_twins(Fw, len(Vw), cache))
     info['charts'], info['splits'] = int(cut.n_islands), splits
     Fc = cut.F
     W = uvc[Fc]
@@ -1358,15 +1361,40 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
             'crossings': crossings, 'u': u, 'bad': bad}
 
 
-def _piece_crossings(Fc, uvc, face_island, n_islands, segments=False):
+def _mesh_twins(F, n, cache):
+    """``topology.twin_halfedges(F, n)`` (3m,), kept in ``cache`` (dict) for the same ``F`` (m,3)."""
+    key = (n, F.shape, hash(F.tobytes()))
+    if cache.get('twin_key') != key:
+        cache['twin_key'], cache['twin'] = key, topology.twin_halfedges(F, n)
+    return cache['twin']
+
+
+def _cut_twins(Fc, twin):
+    """Twins (3m,) of the half-edges of ``Fc`` (m,3), a cut of a manifold oriented mesh (its faces
+    in the same order, e.g. ``cut_along_seams``'s) whose own twins are ``twin`` (3m,): two half-edges
+    stay twins unless the cut separated their ends. Equal to ``topology.twin_halfedges`` of ``Fc``
+    without its sort (a half-edge b->a of the cut maps to the mesh's unique one)."""
+    start = Fc.ravel()
+    end = Fc[:, [1, 2, 0]].ravel()
+    h = np.flatnonzero(twin >= 0)
+    t = twin[h]
+    keep = (start[h] == end[t]) & (end[h] == start[t])
+    out = np.full(len(start), -1, np.int64)
+    out[h[keep]] = t[keep]
+    return out
+
+
+def _piece_crossings(Fc, uvc, face_island, n_islands, segments=False, twin=None):
     """Boundary self-crossings of every piece (island) of a cut layout: list of (count, segments
-    (k,2) of split-vertex pairs, boundary loops) per piece."""
+    (k,2) of split-vertex pairs, boundary loops) per piece. ``twin`` (3m,) optional: the half-edge
+    twins of the mesh that ``Fc`` (m,3) is a cut of (``_cut_twins``)."""
     # one pass over all pieces: they share no split vertex, so the loops of the whole cut layout,
     # grouped by piece, are each piece's own loops in the same order (longest first)
     owner = np.full(len(uvc), -1, np.int64)
     owner[Fc.ravel()] = np.repeat(face_island, 3)
     by_piece = [[] for _ in range(n_islands)]
-    for lp in topology.boundary_loops(Fc, len(uvc)):
+    tw = None if twin is None else _cut_twins(Fc, twin)
+    for lp in topology.boundary_loops(Fc, len(uvc), twin=tw):
         by_piece[owner[lp[0]]].append(lp)
     out = []
     for loops in by_piece:
@@ -1416,19 +1444,22 @@ def _crossing_pairs(uv, seg):
     return [(seg[i], seg[j]) for i, j in zip(a[x], b[x])]
 
 
-def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
+def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS, twin=None):
     """Split an overlapping layout into charts (docs/cones.md, "Charts"). The layout of the cut disk
     is one flat metric, so any piece of it is laid out by the same coordinates: a piece whose boundary
     crosses itself is cut in two along the shortest interior path between the middles of the two
     boundary arcs that the first crossing pair separates, which puts the two crossing segments into
     different pieces; repeated up to ``max_splits`` times. The pieces are then moved apart (shelf
     packing). ``V`` (n,3), ``F`` (m,3) the working mesh; ``cut`` (``islands.Cut``) and ``uvc`` (N,2)
-    its cut disk and layout; ``seams`` (k,2). Returns (cut, uvc, seams, crossings left, splits)."""
+    its cut disk and layout; ``seams`` (k,2); ``twin`` (3m,) optional: ``F``'s half-edge twins
+    (``topology.twin_halfedges``). Returns (cut, uvc, seams, crossings left, splits)."""
     n = len(V)
+    if twin is None:
+        twin = topology.twin_halfedges(F, n)
     splits = 0
     base = np.asarray(seams, np.int64).reshape(-1, 2)
     while True:
-        pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands)
+        pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands, twin=twin)
         bad = [i for i, (c, _, _) in enumerate(pieces) if c]
         if not bad or splits >= max_splits:
             break
@@ -1473,8 +1504,8 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
         cut, uvc = new, uv2
         splits += 1
     if cut.n_islands > 1:
-        cut, uvc, seams = merge_charts(F, n, cut, uvc, seams, base)
-    left = sum(c for c, _, _ in _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands))
+        cut, uvc, seams = merge_charts(F, n, cut, uvc, seams, base, twin=twin)
+    left = sum(c for c, _, _ in _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands, twin=twin))
     if cut.n_islands > 1:
         # move the pieces apart
         from .islands import shelf_pack
@@ -1502,7 +1533,7 @@ def _is_path(keys, n):
     return connected_components(g, directed=False)[0] == 1
 
 
-def merge_charts(F, n, cut, uvc, seams, base):
+def merge_charts(F, n, cut, uvc, seams, base, twin=None):
     """Glue charts of one flat layout back together where that does not overlap (docs/cones.md,
     "Charts"). ``F`` (m,3) the working mesh with ``n`` vertices; ``cut`` (``islands.Cut``) and ``uvc``
     (N,2) its pieces (disks), all laid out by the same flat metric and not yet moved apart, so two
@@ -1510,7 +1541,8 @@ def merge_charts(F, n, cut, uvc, seams, base):
     with the splits; ``base`` (k0,2) the seams that must stay (the cut tree). Greedy: pairs of pieces
     joined by split seams, the longest shared seam first, are glued when the shared seam is one path
     (the union is a disk) and the union's boundary crosses itself no more often than the two pieces'
-    boundaries did. Returns (cut, uvc, seams)."""
+    boundaries did. ``twin`` (3m,) optional: ``F``'s half-edge twins (saves a sort per call).
+    Returns (cut, uvc, seams)."""
     seams = np.unique(np.sort(np.asarray(seams, np.int64).reshape(-1, 2), 1), axis=0)
     w = np.array([n, 1])
     bkey = np.unique(np.sort(np.asarray(base, np.int64).reshape(-1, 2), 1) @ w)
@@ -1527,7 +1559,7 @@ def merge_charts(F, n, cut, uvc, seams, base):
     hk, hf = hkey[hit][order], np.repeat(np.arange(len(F)), 3)[hit][order]
     same = np.nonzero(hk[:-1] == hk[1:])[0]
     ek, fa, fb = hk[same], cut.face_island[hf[same]], cut.face_island[hf[same + 1]]
-    pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands)
+    pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands, twin=twin)
     cross = np.array([c for c, _, _ in pieces])
     loops = {i: list(lp) for i, (_, _, lp) in enumerate(pieces)}
     lab = np.arange(cut.n_islands)
