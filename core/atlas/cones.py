@@ -1238,8 +1238,10 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         fixed[lp] = True
     if not bl:
         fixed[0] = True                      # the ground of ConeSystem, whose factor is ``fac0``
+    reuse = None                             # the cut of a new branch, checked already
     while True:
-        cut = cut_along_seams(F, n, seams)
+        cut = reuse if reuse is not None else cut_along_seams(F, n, seams, twin=twin)
+        reuse = None
         Fc, vert_of = cut.F, cut.vert_of
         twc = _cut_twins(Fc, twin)
         if cut.n_islands != 1 or not is_disk(Fc, len(vert_of), twin=twc):
@@ -1278,16 +1280,19 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         protect = np.zeros(n, bool)
         protect[np.asarray(cones, np.int64)[np.asarray(kappa) < 0]] = True
         new = through_corner(V, F, seams, c, int(vert_of[w0]), stop, protect)
+        c2 = None
         if new is not None:
-            c2 = cut_along_seams(F, n, new)
+            c2 = cut_along_seams(F, n, new, twin=twin)
             if c2.n_islands != 1 or not is_disk(c2.F, len(c2.vert_of), twin=_cut_twins(c2.F, twin)):
-                new = None
+                new, c2 = None, None
         if new is None:
             new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect)
         if new is None:
             failed.add(c)                    # try the next corner; this one keeps its wedge
             continue
         seams = straighten(F, new, stop)
+        if c2 is not None and np.array_equal(np.unique(np.sort(new, 1), axis=0), seams):
+            reuse = c2                       # straightening changed nothing: that cut is this one
         added += 1
     a, b = vert_of[loop], vert_of[np.roll(loop, -1)]
     key = np.minimum(a, b) * n + np.maximum(a, b)
@@ -1498,7 +1503,7 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS, twin=None):
         if added is None:
             break
         seams = np.unique(np.r_[seams, added], axis=0)
-        new = cut_along_seams(F, n, seams)
+        new = cut_along_seams(F, n, seams, twin=twin)
         uv2 = np.zeros((len(new.vert_of), 2))
         uv2[new.F.ravel()] = uvc[cut.F.ravel()]
         cut, uvc = new, uv2
@@ -1601,7 +1606,7 @@ def merge_charts(F, n, cut, uvc, seams, base, twin=None):
     if keep.all():
         return cut, uvc, seams
     seams = seams[keep]
-    new = cut_along_seams(F, n, seams)
+    new = cut_along_seams(F, n, seams, twin=twin)
     uv2 = np.zeros((len(new.vert_of), 2))
     uv2[new.F.ravel()] = uvc[cut.F.ravel()]
     return new, uv2, seams
