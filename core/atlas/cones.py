@@ -1254,11 +1254,19 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         if exact and (n <= BIG_MESH or not (wedge > WEDGE_MAX).any() or added >= max_branches):
             # (big meshes: the linear wedges steer the branches; one exact solve at the end)
             T = cache['disk_T']
-            got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, u - u[fixed].mean(),
-                                   fac0=fac0, krylov=n > BIG_MESH)
+            big = n > BIG_MESH
+            cold = u - u[fixed].mean()
+            if big and 'newton_shift' in cache:
+                # big meshes, another angle set on the same cones: start from the last exact metric's
+                # difference to its linear start (the same solution, fewer damped Newton steps)
+                got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed,
+                                       cold + cache['newton_shift'], fac0=fac0, krylov=True)
             if got is None:
-                got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, np.zeros(n),
-                                       krylov=n > BIG_MESH)
+                got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, cold, fac0=fac0, krylov=big)
+            if got is None:
+                got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, np.zeros(n), krylov=big)
+            if got is not None and big:
+                cache['newton_shift'] = got[0] - cold
             if got is not None:
                 ang = corner_angles_l(got[1][T.FE])
                 wedge = np.bincount(T.F.ravel(), ang.ravel(), minlength=len(vert_of))[loop]
