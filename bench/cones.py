@@ -20,9 +20,10 @@ rocker-arm 8 cones 0.420, 18 cones 0.617.
 and 18), placed and laid out by ``cone_unwrap``, beside the published figure.
 
 ``--big``: the speed target, auto cones plus flattening on ~100k-triangle meshes (spot subdivided
-twice; a blob), with time and peak memory. Meshes are read from ``meshes.corpus_dir()`` (outside the
-repository); the script says so and skips a mesh that is missing. Cow's non-manifold vertex is split
-by ``cone_unwrap`` itself. Timings are noisy (shared machine)."""
+twice; a blob), with wall and CPU time, stage times and peak memory (``--big-extra``: also
+cheburashka and rocker-arm subdivided once, cow twice). Meshes are read from
+``meshes.corpus_dir()`` (outside the repository); the script says so and skips a mesh that is
+missing. Cow's non-manifold vertex is split by ``cone_unwrap`` itself. Timings are noisy (shared machine)."""
 import argparse
 import os
 import resource
@@ -166,29 +167,39 @@ def table(names, budgets, anchor, use_xatlas, auto=True, per_mesh=None):
                 print(f"| {name} | xatlas | not installed (pip install xatlas; benchmarks only) |")
 
 
-def big():
-    print('| mesh | triangles | cones | charts | p1/p99 (area) | mu_ratio | qc_mean | flips | cross '
-          '| s (total) | s by stage | peak RSS MB |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|')
+def big(extra=False):
+    """The speed rows: wall and CPU seconds (CPU: this process, all threads), the stage times of
+    ``report['seconds']``, the peak resident memory of the process so far (it only grows from row to
+    row) and the load average when the row ended (the machine is shared: compare rows run minutes
+    apart, interleaved). ``extra``: also cheburashka and rocker-arm subdivided once and cow twice
+    (needles, genus 1, a split non-manifold vertex), the robustness rows of the big-mesh path."""
+    print('| mesh | triangles | cones | charts | p1/p99 (area) | p1/p99 (count) | mu_ratio | qc_mean | flips '
+          '| cross | s (wall) | s (CPU) | s by stage | peak RSS MB | load |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
     cases = []
-    got = load('spot')
-    if got is not None:
+    for name, times in [('spot', 2)] + ([('cheburashka', 1), ('rocker-arm', 1), ('cow', 2)] if extra else []):
+        got = load(name)
+        if got is None:
+            continue
         V, F = got
-        for _ in range(2):
+        for _ in range(times):
             V, F = subdivide(V, F)
-        cases.append(('spot subdivided x2', V, F))
-    cases.append(('blob(71)', *blob(71)))
+        cases.append((f"{name} subdivided x{times}", V, F))
+        if name == 'spot':
+            cases.append(('blob(71)', *blob(71)))
+    if not cases:
+        cases.append(('blob(71)', *blob(71)))
     for name, V, F in cases:
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         res = cone_unwrap(V, F, target_ratio=0.5)
-        dt = time.perf_counter() - t
+        dt, dc = time.perf_counter() - t, time.process_time() - c
         r = res.report
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         stages = ', '.join(f"{k} {v:.1f}" for k, v in r['seconds'].items() if k != 'total')
         print(f"| {name} | {len(F)} | {r['cones']} | {r['charts']} | {r['mu_ratio_p1_p99_area']:.3f} | "
-              f"{r['mu_ratio']:.3f} | "
-              f"{r['qc_mean']:.3f} | {r['flips']} | {r['overlaps']} | {dt:.1f} | {stages} | {peak:.0f} |",
-              flush=True)
+              f"{r['mu_ratio_p1_p99']:.3f} | {r['mu_ratio']:.3f} | "
+              f"{r['qc_mean']:.3f} | {r['flips']} | {r['overlaps']} | {dt:.1f} | {dc:.1f} | {stages} | "
+              f"{peak:.0f} | {os.getloadavg()[0]:.1f} |", flush=True)
 
 
 def main():
@@ -199,10 +210,12 @@ def main():
     ap.add_argument('--no-xatlas', action='store_true')
     ap.add_argument('--no-auto', action='store_true', help="skip the 'auto' (target 0.5) rows")
     ap.add_argument('--big', action='store_true', help='only the 100k-triangle speed rows')
+    ap.add_argument('--big-extra', action='store_true',
+                    help='with --big: also cheburashka, rocker-arm (subdivided once) and cow (twice)')
     ap.add_argument('--acceptance', action='store_true', help='only the MovingCones rows')
     a = ap.parse_args()
     if a.big:
-        big()
+        big(a.big_extra)
     elif a.acceptance:
         table(list(MOVING_CONES), [], False, False, False, per_mesh=MOVING_CONES)
     else:

@@ -414,3 +414,73 @@ def test_cone_angles_respect_the_obtuse_corner_floor():
     v = order[0]
     assert abs((2 * np.pi - floor0[v]) / (2 * np.pi - sy.Omega[v]) * th[v]
                - (np.pi - CORNER_MARGIN)) < 1e-9
+
+
+def test_krylov_newton_reaches_the_same_flat_metric():
+    """The big meshes' inexact Newton (conjugate gradients preconditioned by the closed Laplacian's
+    factor, ``krylov=True``) converges to the chord method's flat cone metric (the same unique
+    solution up to round-off), from the linear log scale and from zero (no preconditioner: it factors
+    the Hessian itself)."""
+    from core.atlas.cones import _disk_laplacian, flat_cone_metric
+    from core.mesh.intrinsic import corner_angles
+    V, F = blob(10)
+    sy = ConeSystem(V, F)
+    S = np.array([5, 90, 160, 300, 420, 610])
+    kap = sy.l2_angles(S)
+    seams = cut_graph(V, F, S)
+    cut = cut_along_seams(F, len(V), seams)
+    cache = {}
+    _disk_laplacian(V[cut.vert_of], cut.F, cache)
+    T = cache['disk_T']
+    n = len(V)
+    target = np.full(n, 2 * np.pi)
+    target[S] -= kap
+    fixed = np.zeros(n, bool)
+    fixed[0] = True
+    u_lin = sy.u_of(S, kap)
+    ref = flat_cone_metric(T, cut.vert_of, n, target, fixed, u_lin - u_lin[0], fac0=sy._fac)
+    for u0, fac0 in ((u_lin - u_lin[0], sy._fac), (np.zeros(n), None)):
+        u, el, flat = flat_cone_metric(T, cut.vert_of, n, target, fixed, u0, fac0=fac0, krylov=True)
+        assert flat == 0
+        sums = np.bincount(cut.vert_of[T.F].ravel(), corner_angles(el[T.FE]).ravel(), minlength=n)
+        assert np.abs(sums - target)[1:].max() < 1e-9
+        assert np.abs(u - ref[0]).max() < 1e-8
+
+
+def test_fast_paths_equal_the_plain_computations():
+    """The big-mesh shortcuts give the same numbers as the plain computations: the weighted 1%/99%
+    tails from ``argpartition`` (``_weighted_tails``) against the full sort, a cut's half-edge twins
+    derived from the mesh's (``_cut_twins``) against ``topology.twin_halfedges``, ``is_disk`` with
+    known twins, and the Green's columns in and out of their insertion order."""
+    from core.atlas.cones import _cut_twins, _weighted_tails
+    rng = np.random.default_rng(3)
+    for t in range(40):
+        m = int(rng.integers(200, 4000))
+        x = rng.normal(size=m) if t % 2 else np.round(rng.normal(size=m), 1)      # with ties
+        w = rng.exponential(size=m) ** (1 + 2 * (t % 3))                         # uneven weights
+        lo, hi = _weighted_tails(x, w, 0.01)
+        order = np.argsort(x)
+        c = np.cumsum(w[order])
+        c /= c[-1]
+        assert lo == x[order[np.searchsorted(c, 0.01)]]
+        assert hi == x[order[min(np.searchsorted(c, 0.99), m - 1)]]
+    V, F = blob(8)
+    n = len(V)
+    tw = topology.twin_halfedges(F, n)
+    for S in ([5, 90, 160, 300], [7, 33, 250, 333, 401, 480]):
+        seams = cut_graph(V, F, np.array(S))
+        for extra in (0, 40):                           # a disk, and pieces with holes
+            E, _ = topology.unique_edges(F)
+            more = np.r_[seams, E[rng.choice(len(E), extra, replace=False)]] if extra else seams
+            cut = cut_along_seams(F, n, more)
+            N = len(cut.vert_of)
+            twc = _cut_twins(cut.F, tw)
+            assert np.array_equal(twc, topology.twin_halfedges(cut.F, N))
+            assert is_disk(cut.F, N, twin=twc) == is_disk(cut.F, N) == (extra == 0)
+            assert cut_along_seams(F, n, more, twin=tw).F.tolist() == cut.F.tolist()
+    sy = ConeSystem(V, F)
+    a = sy.columns([3, 50, 70])
+    b = sy.columns([70, 3, 99])
+    assert np.array_equal(a[:, [2, 0]], b[:, :2]) and b.flags['C_CONTIGUOUS']
+    r = sy.L @ b[:, 2]                                  # grounded at vertex 0: L x = e_99 elsewhere
+    assert b[0, 2] == 0 and np.abs(r[1:] - np.eye(1, n, 99)[0][1:]).max() < 1e-8

@@ -70,6 +70,8 @@ SOFT_FLOORS = (-2.0, -1.0, 0.0)     # raised lower bounds of cones next to a fli
 VERIFY = 3                         # screened candidates (moves, greedy look-ahead) scored exactly
 MOVE_RADIUS = 3                    # cone moves: each cone tries the vertices within this many edges
 REFACTOR = 0.5                     # Newton: factor the Hessian again when |r| fell by less than this
+KRYLOV_ETA = 0.1                   # big meshes' inexact Newton: relative tolerance of the inner solve
+KRYLOV_ITERS = 12                  # its conjugate gradient iterations before the Hessian is factored
 CORRECTIONS = 2                    # fixed-point steps of the angles for the exact metric's log scale
 MAX_SPLITS = 10                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
 CORNER_MARGIN = 0.15              # a cone's corners are kept this far below pi (rad): kappa_floor
@@ -78,6 +80,7 @@ SPARSE_LAMBDA = 0.1                # the L2 start's penalty weight (times 1/n; s
 SPARSE_ITERS = 15                  # reweighting rounds of the L2 start
 ALT_MARGIN = 0.02                  # another placement is laid out when its estimate beats the realised
                                    # ratio of the best clean layout by this much
+SPREAD_PARTIAL_MIN = 2 * BIG_MESH  # face_spread over more triangles: the tails only (``_weighted_tails``)
 SPARSE_POOL = 3                    # the L2 start places SPARSE_POOL times the cones, then thins them
 
 
@@ -133,11 +136,14 @@ class ConeSystem:
         self.needs_sum = not loops
         fixed = bnd.copy() if loops else np.eye(1, n, int(ground), dtype=bool)[0]
         self.free = np.nonzero(~fixed)[0]
-        self._fac = Factor(self.L[self.free][:, self.free])
+        # big meshes: CHOLMOD (its solves take half of SuperLU's time: one per Green's column and per
+        # conjugate gradient step of the exact layout; docs/cones.md, "Speed")
+        self._fac = Factor(self.L[self.free][:, self.free], method='cholmod' if n > BIG_MESH else None)
         self.eligible = ~bnd
         self.bounds = L2_BOUNDS        # curvature bounds of l2_angles (set by place_cones)
         self.total = 2 * np.pi * self.chi if self.needs_sum else None
-        self._cols = {}
+        self._cols = {}                # vertex -> its column in self._G (the Green's columns solved so far)
+        self._G = np.empty((n, 0))
         self.u0 = self.solve(-self.Omega)
         # per-vertex area (a third of the incident triangles), for area-weighted statistics
         self.vertex_area = np.bincount(F.ravel(), np.repeat(self.A / 3, 3), minlength=n)
@@ -158,18 +164,33 @@ class ConeSystem:
         return x
 
     def columns(self, S):
-        """(n,k) Green's columns ``G[:, S]`` (the response of u to unit curvature at each cone)."""
+        """(n,k) Green's columns ``G[:, S]`` (the response of u to unit curvature at each cone).
+
+        Every column is solved once and kept in one (n, capacity) array (``_cols`` maps a vertex to
+        its column there); when ``S`` are the first columns in the order they were added (the
+        greedy placement's case) a view of them is returned, else a gathered copy (C order: the
+        products with it round exactly as with the columns stacked, so the results do not change).
+        Callers must not write into the result."""
         S = [int(s) for s in S]
-        new = [s for s in S if s not in self._cols]
+        new = list(dict.fromkeys(s for s in S if s not in self._cols))
         if new:
             B = np.zeros((self.n, len(new)))
             B[new, np.arange(len(new))] = 1.0
             X = self.solve(B)
+            k0 = len(self._cols)
+            if k0 + len(new) > self._G.shape[1]:             # grow the store (doubling)
+                G = np.empty((self.n, max(2 * self._G.shape[1], k0 + len(new), 8)))
+                G[:, :k0] = self._G[:, :k0]
+                self._G = G
+            self._G[:, k0:k0 + len(new)] = X
             for j, s in enumerate(new):
-                self._cols[s] = X[:, j]
+                self._cols[s] = k0 + j
         if not S:
             return np.zeros((self.n, 0))
-        return np.stack([self._cols[s] for s in S], axis=1)
+        idx = [self._cols[s] for s in S]
+        if idx == list(range(len(idx))):
+            return self._G[:, :len(idx)]
+        return np.take(self._G, idx, axis=1)                  # C order, like the view
 
     def u_of(self, S, kappa):
         """Log scale u (n,) with curvature ``kappa`` (k,) at cones ``S`` (k,)."""
@@ -325,12 +346,40 @@ def face_spread(F, A, u, q=1.0):
     """Area-weighted q% / (100-q)% spread of the per-triangle log scale (mean of the corners' u):
     ``exp(p_q - p_{100-q})``, the vertex-level estimate of the realised ``p1/p99`` (q = 1)."""
     uf = u[F].mean(1)
+    if len(uf) > SPREAD_PARTIAL_MIN:
+        lo, hi = _weighted_tails(uf, A, q / 100)
+        if lo is not None:
+            return float(np.exp(lo - hi))
     order = np.argsort(uf)
     c = np.cumsum(A[order])
     c /= c[-1]
     lo = uf[order[np.searchsorted(c, q / 100)]]
     hi = uf[order[min(np.searchsorted(c, 1 - q / 100), len(c) - 1)]]
     return float(np.exp(lo - hi))
+
+
+def _weighted_tails(x, w, q):
+    """The weighted ``q`` and ``1 - q`` quantiles (lo, hi) of ``x`` (m,) with nonnegative weights
+    ``w`` (m,), as ``face_spread``'s full sort defines them (lo: the first value in increasing order
+    whose cumulative weight reaches ``q`` of the total; hi: the first one reaching ``1 - q``), from
+    the two tails only: ``np.argpartition`` picks the ``k`` smallest and ``k`` largest values (``k``
+    doubled until their weight exceeds ``q`` of the total), which are sorted. O(m) instead of the
+    full sort's O(m log m) (big meshes: ``face_spread`` runs once per greedy cone). Returns
+    (None, None) when a tail would need more than half of the values (use the full sort)."""
+    m = len(x)
+    total = float(w.sum())
+    k = min(m, int(4 * q * m) + 64)
+    while 2 * k <= m:
+        part = np.argpartition(x, (k - 1, m - k))
+        lo_i, hi_i = part[:k], part[m - k:]
+        if w[lo_i].sum() > q * total * (1 + 1e-9) and w[hi_i].sum() > q * total * (1 + 1e-9):
+            o = lo_i[np.argsort(x[lo_i])]
+            lo = x[o[np.searchsorted(np.cumsum(w[o]), q * total)]]
+            o = hi_i[np.argsort(-x[hi_i])]
+            j = np.searchsorted(np.cumsum(w[o]), q * total, side='right')
+            return lo, x[o[j]]
+        k *= 2
+    return None, None
 
 
 def weighted_spread(x, w, q=1.0):
@@ -390,7 +439,10 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
             ref = u[S[0]] if S else np.median(u[system.eligible])
             S.append(int(idx[np.argmax(np.abs(u[idx] - ref))]))
             kap = system.dirichlet_angles(S)
-            best = face_spread(system.F, system.A, system.u_of(S, kap))
+            u = system.u_of(S, kap)
+            best = face_spread(system.F, system.A, u)
+            history.append((len(S), best))
+            continue
         u = system.u_of(S, kap)
         history.append((len(S), best))
     return S, history
@@ -810,7 +862,60 @@ def _disk_laplacian(Vc, Fc, cache=None):
     return L
 
 
-def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-12, fac0=None):
+def _free_pattern(a0, a1, free_mask):
+    """The sparsity pattern of the cotan Hessian ``sum_e W_e (d_a - d_b)(d_a - d_b)^T`` on the free
+    vertices, built once per cut disk. ``a0``, ``a1`` (E,) the surface vertices of each edge of the
+    cut disk's triangulation; ``free_mask`` (n,) bool. Returns (slot (2E + n,) position of each
+    entry (off-diagonal a-b, b-a per edge, then the diagonal of every surface vertex) in the CSR
+    data, or -1 where a row or column is fixed; indices; indptr; size)."""
+    n = len(free_mask)
+    rows = np.r_[a0, a1, np.arange(n)]
+    cols = np.r_[a1, a0, np.arange(n)]
+    at = np.full(n, -1, np.int64)
+    nf = int(free_mask.sum())
+    at[free_mask] = np.arange(nf)
+    fr, fc = at[rows], at[cols]
+    keep = (fr >= 0) & (fc >= 0)
+    key = fr[keep] * nf + fc[keep]
+    uniq, inv = np.unique(key, return_inverse=True)
+    slot = np.full(len(rows), -1, np.int64)
+    slot[keep] = inv.ravel()
+    indptr = np.zeros(nf + 1, np.int64)
+    np.cumsum(np.bincount(uniq // nf, minlength=nf), out=indptr[1:])
+    return slot, (uniq % nf).astype(np.int32), indptr, nf
+
+
+def _pcg(H, b, fac, rtol, maxiter):
+    """Preconditioned conjugate gradients for ``H x = b`` (``H`` (k,k) sparse symmetric positive
+    definite, ``b`` (k,)) with the factorisation ``fac`` of a nearby matrix as preconditioner, until
+    ``|b - H x| <= rtol |b|`` or ``maxiter`` iterations. Returns (x (k,), |b - H x| / |b| reached;
+    inf if ``H`` is not positive definite along a search direction)."""
+    x = np.zeros_like(b)
+    res = b.copy()
+    bn = float(np.linalg.norm(b))
+    rel = 1.0
+    z = fac.solve(res)
+    p = z.copy()
+    rz = float(res @ z)
+    for _ in range(maxiter):
+        Hp = H @ p
+        pHp = float(p @ Hp)
+        if not pHp > 0:
+            return x, np.inf
+        a = rz / pHp
+        x += a * p
+        res -= a * Hp
+        rel = float(np.linalg.norm(res)) / bn
+        if rel <= rtol:
+            break
+        z = fac.solve(res)
+        rz2 = float(res @ z)
+        p = z + (rz2 / rz) * p
+        rz = rz2
+    return x, rel
+
+
+def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-12, fac0=None, krylov=False):
     """Exact flat cone metric by Newton's method on the discrete conformal (Yamabe) equation
     (docs/cones.md, "Exact layout").
 
@@ -828,8 +933,13 @@ def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-12, f
     break the triangle inequality counts with the angles (pi, 0, 0) (the energy's convex extension;
     it lays out flat). ``tol`` (rad) on the angle sums: 1e-12, because a residual of 5e-11 left the
     rotation along a seam varying by 1e-9 rad (the seam test's bound); a result that stalls above it
-    is still accepted up to 1e-7. Returns (u (n,), edge lengths (E,),
-    count of such flat triangles) or None when it does not converge."""
+    is still accepted up to 1e-7. ``krylov`` (big meshes): inexact Newton instead of chord steps:
+    every step solves with the current Hessian by conjugate gradients preconditioned with the last
+    factorisation (``fac0`` at first; forcing term ``min(KRYLOV_ETA, |r|)``, at most
+    ``KRYLOV_ITERS`` iterations), so the steps stay Newton steps (quadratic convergence) and the
+    Hessian is factored only when the conjugate gradients stall (spot subdivided twice: 6 steps and
+    no factorisation, against 22 chord steps and one factorisation). Returns (u (n,), edge lengths
+    (E,), count of such flat triangles) or None when it does not converge."""
     import scipy.sparse as sp
     a0, a1 = vert_of[T.edge_vertices()].T
     Fo = vert_of[T.F]
@@ -848,14 +958,43 @@ def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-12, f
     u = np.array(u0, np.float64)
     st = state(u)
     fac, fresh, last = fac0, False, np.inf
+    if krylov:
+        slot, indices, indptr, nf = _free_pattern(a0, a1, ~fixed)
+        use = slot >= 0
+        slot = slot[use]
+        FE = T.FE.ravel()
+        n_edges = len(a0)
     for _ in range(max_iter):
         el, l, r, valid = st
         norm = float(np.linalg.norm(r))
         if float(np.abs(r).max()) < tol:
             break
-        # the Hessian is factored again only when the residual stops falling fast (a chord step
-        # with the previous factorisation costs one solve; a factorisation of a 100k mesh ~1 s)
-        if fac is None or norm > REFACTOR * last:
+        if krylov:
+            # inexact Newton: the current Hessian, solved by conjugate gradients preconditioned with
+            # the last factorisation; factored again only when they stall
+            with np.errstate(divide='ignore', invalid='ignore'):
+                w = 0.5 * corner_cotangents_l(l)
+            w[~valid] = 0.0
+            We = np.bincount(FE, w.ravel(), minlength=n_edges)          # cotan weight per edge
+            Wd = np.bincount(a0, We, minlength=n) + np.bincount(a1, We, minlength=n)
+            data = np.bincount(slot, np.r_[-We, -We, Wd][use], minlength=len(indices))
+            H = sp.csr_matrix((data, indices, indptr), shape=(nf, nf))
+            ok = False
+            if fac is not None:
+                # the inner tolerance falls with |r| (superlinear convergence); a step that gained
+                # KRYLOV_ETA is taken even if that tolerance is not reached
+                du, rel = _pcg(H, r[free], fac, min(KRYLOV_ETA, norm), KRYLOV_ITERS)
+                ok = rel <= KRYLOV_ETA
+            fresh = not ok
+            if not ok:
+                try:
+                    fac = Factor(H.tocsc())
+                except (ConformalError, RuntimeError, ValueError):
+                    return None
+                du = fac.solve(r[free])
+        elif fac is None or norm > REFACTOR * last:
+            # the Hessian is factored again only when the residual stops falling fast (a chord step
+            # with the previous factorisation costs one solve; a factorisation of a 100k mesh ~1 s)
             with np.errstate(divide='ignore', invalid='ignore'):
                 w = 0.5 * corner_cotangents_l(l)
             w[~valid] = 0.0
@@ -868,8 +1007,9 @@ def flat_cone_metric(T, vert_of, n, target, fixed, u0, max_iter=40, tol=1e-12, f
                 return None
         else:
             fresh = False
+        if not krylov:
+            du = fac.solve(r[free])
         last = norm
-        du = fac.solve(r[free])
         if not np.isfinite(du).all():
             return None
         t = 1.0
@@ -1092,17 +1232,21 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
     kap_all = np.zeros(n)
     kap_all[np.asarray(cones, np.int64)] = kappa
     fixed = np.zeros(n, bool)
-    bl = topology.boundary_loops(F, n)
+    twin = _mesh_twins(F, n, cache)             # the working mesh's half-edge twins, for its cuts
+    bl = topology.boundary_loops(F, n, twin=twin)
     for lp in bl:
         fixed[lp] = True
     if not bl:
         fixed[0] = True                      # the ground of ConeSystem, whose factor is ``fac0``
+    reuse = None                             # the cut of a new branch, checked already
     while True:
-        cut = cut_along_seams(F, n, seams)
+        cut = reuse if reuse is not None else cut_along_seams(F, n, seams, twin=twin)
+        reuse = None
         Fc, vert_of = cut.F, cut.vert_of
-        if cut.n_islands != 1 or not is_disk(Fc, len(vert_of)):
+        twc = _cut_twins(Fc, twin)
+        if cut.n_islands != 1 or not is_disk(Fc, len(vert_of), twin=twc):
             raise ConformalError("the cut graph does not open the surface into a disk", 'bad_topology')
-        loop = topology.boundary_loops(Fc, len(vert_of))[0]
+        loop = topology.boundary_loops(Fc, len(vert_of), twin=twc)[0]
         Vc, uc = V[vert_of], u[vert_of]
         kt, lt, Lc = _boundary_data(Vc, Fc, loop, uc, vert_of, Lu, cache)
         wedge = np.pi - kt
@@ -1110,10 +1254,19 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         if exact and (n <= BIG_MESH or not (wedge > WEDGE_MAX).any() or added >= max_branches):
             # (big meshes: the linear wedges steer the branches; one exact solve at the end)
             T = cache['disk_T']
-            got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, u - u[fixed].mean(),
-                                   fac0=fac0)
+            big = n > BIG_MESH
+            cold = u - u[fixed].mean()
+            if big and 'newton_shift' in cache:
+                # big meshes, another angle set on the same cones: start from the last exact metric's
+                # difference to its linear start (the same solution, fewer damped Newton steps)
+                got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed,
+                                       cold + cache['newton_shift'], fac0=fac0, krylov=True)
             if got is None:
-                got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, np.zeros(n))
+                got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, cold, fac0=fac0, krylov=big)
+            if got is None:
+                got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, np.zeros(n), krylov=big)
+            if got is not None and big:
+                cache['newton_shift'] = got[0] - cold
             if got is not None:
                 ang = corner_angles_l(got[1][T.FE])
                 wedge = np.bincount(T.F.ravel(), ang.ravel(), minlength=len(vert_of))[loop]
@@ -1135,16 +1288,19 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         protect = np.zeros(n, bool)
         protect[np.asarray(cones, np.int64)[np.asarray(kappa) < 0]] = True
         new = through_corner(V, F, seams, c, int(vert_of[w0]), stop, protect)
+        c2 = None
         if new is not None:
-            c2 = cut_along_seams(F, n, new)
-            if c2.n_islands != 1 or not is_disk(c2.F, len(c2.vert_of)):
-                new = None
+            c2 = cut_along_seams(F, n, new, twin=twin)
+            if c2.n_islands != 1 or not is_disk(c2.F, len(c2.vert_of), twin=_cut_twins(c2.F, twin)):
+                new, c2 = None, None
         if new is None:
             new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect)
         if new is None:
             failed.add(c)                    # try the next corner; this one keeps its wedge
             continue
         seams = straighten(F, new, stop)
+        if c2 is not None and np.array_equal(np.unique(np.sort(new, 1), axis=0), seams):
+            reuse = c2                       # straightening changed nothing: that cut is this one
         added += 1
     a, b = vert_of[loop], vert_of[np.roll(loop, -1)]
     key = np.minimum(a, b) * n + np.maximum(a, b)
@@ -1193,7 +1349,8 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
     crossings = boundary_crossings(uvc, [loop])
     splits = 0
     if crossings and split:
-        cut, uvc, seams, crossings, splits = split_overlaps(Vw, Fw, cut, uvc, seams)
+        cut, uvc, seams, crossings, splits = split_overlaps(Vw, Fw, cut, uvc, seams,
+                                                            twin=_mesh_twins(Fw, len(Vw), cache))
     info['charts'], info['splits'] = int(cut.n_islands), splits
     Fc = cut.F
     W = uvc[Fc]
@@ -1217,13 +1374,43 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
             'crossings': crossings, 'u': u, 'bad': bad}
 
 
-def _piece_crossings(Fc, uvc, face_island, n_islands, segments=False):
+def _mesh_twins(F, n, cache):
+    """``topology.twin_halfedges(F, n)`` (3m,), kept in ``cache`` (dict) for the same ``F`` (m,3)."""
+    key = (n, F.shape, hash(F.tobytes()))
+    if cache.get('twin_key') != key:
+        cache['twin_key'], cache['twin'] = key, topology.twin_halfedges(F, n)
+    return cache['twin']
+
+
+def _cut_twins(Fc, twin):
+    """Twins (3m,) of the half-edges of ``Fc`` (m,3), a cut of a manifold oriented mesh (its faces
+    in the same order, e.g. ``cut_along_seams``'s) whose own twins are ``twin`` (3m,): two half-edges
+    stay twins unless the cut separated their ends. Equal to ``topology.twin_halfedges`` of ``Fc``
+    without its sort (a half-edge b->a of the cut maps to the mesh's unique one)."""
+    start = Fc.ravel()
+    end = Fc[:, [1, 2, 0]].ravel()
+    h = np.flatnonzero(twin >= 0)
+    t = twin[h]
+    keep = (start[h] == end[t]) & (end[h] == start[t])
+    out = np.full(len(start), -1, np.int64)
+    out[h[keep]] = t[keep]
+    return out
+
+
+def _piece_crossings(Fc, uvc, face_island, n_islands, segments=False, twin=None):
     """Boundary self-crossings of every piece (island) of a cut layout: list of (count, segments
-    (k,2) of split-vertex pairs, boundary loops) per piece."""
+    (k,2) of split-vertex pairs, boundary loops) per piece. ``twin`` (3m,) optional: the half-edge
+    twins of the mesh that ``Fc`` (m,3) is a cut of (``_cut_twins``)."""
+    # one pass over all pieces: they share no split vertex, so the loops of the whole cut layout,
+    # grouped by piece, are each piece's own loops in the same order (longest first)
+    owner = np.full(len(uvc), -1, np.int64)
+    owner[Fc.ravel()] = np.repeat(face_island, 3)
+    by_piece = [[] for _ in range(n_islands)]
+    tw = None if twin is None else _cut_twins(Fc, twin)
+    for lp in topology.boundary_loops(Fc, len(uvc), twin=tw):
+        by_piece[owner[lp[0]]].append(lp)
     out = []
-    for i in range(n_islands):
-        Fi = Fc[face_island == i]
-        loops = topology.boundary_loops(Fi, len(uvc))
+    for loops in by_piece:
         cnt, seg = boundary_crossings(uvc, loops, return_segments=True)
         out.append((cnt, seg, loops))
     return out
@@ -1270,19 +1457,22 @@ def _crossing_pairs(uv, seg):
     return [(seg[i], seg[j]) for i, j in zip(a[x], b[x])]
 
 
-def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
+def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS, twin=None):
     """Split an overlapping layout into charts (docs/cones.md, "Charts"). The layout of the cut disk
     is one flat metric, so any piece of it is laid out by the same coordinates: a piece whose boundary
     crosses itself is cut in two along the shortest interior path between the middles of the two
     boundary arcs that the first crossing pair separates, which puts the two crossing segments into
     different pieces; repeated up to ``max_splits`` times. The pieces are then moved apart (shelf
     packing). ``V`` (n,3), ``F`` (m,3) the working mesh; ``cut`` (``islands.Cut``) and ``uvc`` (N,2)
-    its cut disk and layout; ``seams`` (k,2). Returns (cut, uvc, seams, crossings left, splits)."""
+    its cut disk and layout; ``seams`` (k,2); ``twin`` (3m,) optional: ``F``'s half-edge twins
+    (``topology.twin_halfedges``). Returns (cut, uvc, seams, crossings left, splits)."""
     n = len(V)
+    if twin is None:
+        twin = topology.twin_halfedges(F, n)
     splits = 0
     base = np.asarray(seams, np.int64).reshape(-1, 2)
     while True:
-        pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands)
+        pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands, twin=twin)
         bad = [i for i, (c, _, _) in enumerate(pieces) if c]
         if not bad or splits >= max_splits:
             break
@@ -1321,14 +1511,14 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS):
         if added is None:
             break
         seams = np.unique(np.r_[seams, added], axis=0)
-        new = cut_along_seams(F, n, seams)
+        new = cut_along_seams(F, n, seams, twin=twin)
         uv2 = np.zeros((len(new.vert_of), 2))
         uv2[new.F.ravel()] = uvc[cut.F.ravel()]
         cut, uvc = new, uv2
         splits += 1
     if cut.n_islands > 1:
-        cut, uvc, seams = merge_charts(F, n, cut, uvc, seams, base)
-    left = sum(c for c, _, _ in _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands))
+        cut, uvc, seams = merge_charts(F, n, cut, uvc, seams, base, twin=twin)
+    left = sum(c for c, _, _ in _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands, twin=twin))
     if cut.n_islands > 1:
         # move the pieces apart
         from .islands import shelf_pack
@@ -1356,7 +1546,7 @@ def _is_path(keys, n):
     return connected_components(g, directed=False)[0] == 1
 
 
-def merge_charts(F, n, cut, uvc, seams, base):
+def merge_charts(F, n, cut, uvc, seams, base, twin=None):
     """Glue charts of one flat layout back together where that does not overlap (docs/cones.md,
     "Charts"). ``F`` (m,3) the working mesh with ``n`` vertices; ``cut`` (``islands.Cut``) and ``uvc``
     (N,2) its pieces (disks), all laid out by the same flat metric and not yet moved apart, so two
@@ -1364,7 +1554,8 @@ def merge_charts(F, n, cut, uvc, seams, base):
     with the splits; ``base`` (k0,2) the seams that must stay (the cut tree). Greedy: pairs of pieces
     joined by split seams, the longest shared seam first, are glued when the shared seam is one path
     (the union is a disk) and the union's boundary crosses itself no more often than the two pieces'
-    boundaries did. Returns (cut, uvc, seams)."""
+    boundaries did. ``twin`` (3m,) optional: ``F``'s half-edge twins (saves a sort per call).
+    Returns (cut, uvc, seams)."""
     seams = np.unique(np.sort(np.asarray(seams, np.int64).reshape(-1, 2), 1), axis=0)
     w = np.array([n, 1])
     bkey = np.unique(np.sort(np.asarray(base, np.int64).reshape(-1, 2), 1) @ w)
@@ -1381,7 +1572,7 @@ def merge_charts(F, n, cut, uvc, seams, base):
     hk, hf = hkey[hit][order], np.repeat(np.arange(len(F)), 3)[hit][order]
     same = np.nonzero(hk[:-1] == hk[1:])[0]
     ek, fa, fb = hk[same], cut.face_island[hf[same]], cut.face_island[hf[same + 1]]
-    pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands)
+    pieces = _piece_crossings(cut.F, uvc, cut.face_island, cut.n_islands, twin=twin)
     cross = np.array([c for c, _, _ in pieces])
     loops = {i: list(lp) for i, (_, _, lp) in enumerate(pieces)}
     lab = np.arange(cut.n_islands)
@@ -1423,7 +1614,7 @@ def merge_charts(F, n, cut, uvc, seams, base):
     if keep.all():
         return cut, uvc, seams
     seams = seams[keep]
-    new = cut_along_seams(F, n, seams)
+    new = cut_along_seams(F, n, seams, twin=twin)
     uv2 = np.zeros((len(new.vert_of), 2))
     uv2[new.F.ravel()] = uvc[cut.F.ravel()]
     return new, uv2, seams
@@ -1514,8 +1705,13 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         t = time.perf_counter()
         deg = np.bincount(seams0.ravel(), minlength=n)
 
+        def big_done():
+            """Big mesh: the first clean layout is kept, so no further candidate is computed."""
+            return n > BIG_MESH and best is not None and best[0][0]
+
         def candidates():
-            """Angle sets to lay out: the placement's, L-inf angles with floors, BFF's (lazily)."""
+            """Angle sets to lay out: the placement's, L-inf angles with floors, BFF's (lazily: on a
+            big mesh nothing more is computed once a layout is clean)."""
             if given or not len(S) or n <= BIG_MESH:
                 yield ('given' if given else 'placement'), kappa
             if given or not len(S):
@@ -1526,6 +1722,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                 low = np.where(leaf, KAPPA_LEAF, system.bounds[0])
                 yield 'l2, leaves >= 0.4', system.l2_angles(S, lower=low)
             for floor in ANGLE_FLOORS:
+                if big_done():
+                    return
                 k2, _ = system.trimmed_angles(S, lower=np.where(leaf, KAPPA_LEAF, max(floor, KAPPA_MIN)),
                                               rounds=3 if n <= BIG_MESH else 1)
                 if k2 is not None:
@@ -1576,7 +1774,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
 
         import itertools
         for label, kap in itertools.chain(cands, corrected(), softened()):
-            if best is not None and best[0][0] and n > BIG_MESH:
+            if big_done():
                 break                                   # big mesh: the first valid layout is kept
             try:
                 ev = _evaluate(Vw, Fw, system, S, kap, seams0, cache)

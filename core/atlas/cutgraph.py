@@ -200,15 +200,29 @@ def cut_graph(V, F, cones, root=None):
     return cut
 
 
-def is_disk(F, n):
+def is_disk(F, n, twin=None):
     """True if ``F`` (m,3) over ``n`` vertices (unused vertices allowed) is one connected piece with
-    one boundary loop and Euler characteristic 1."""
-    loops = topology.boundary_loops(F, n)
-    ncomp = connected_components(topology.vertex_adjacency(F, n), directed=False)[0]
+    one boundary loop and Euler characteristic 1. One sort of the edge keys (``topology.edge_table``)
+    gives the edge count and, on a manifold consistently oriented ``F``, the twins for the loops;
+    ``twin`` (3m,) optional: those twins, known to the caller (``F`` manifold and oriented; an edge
+    then has two half-edges, or one on the boundary), which saves the sort."""
+    F = np.asarray(F, np.int64)
+    if twin is None:
+        E, counts, twin, same_way = topology.edge_table(F, n)
+        manifold = same_way == 0 and (counts <= 2).all()
+        n_edges = len(E)
+    else:
+        manifold = True
+        n_edges = (3 * len(F) + int((twin < 0).sum())) // 2
+    loops = topology.boundary_loops(F, n, twin=twin if manifold else None)
+    if len(loops) != 1:
+        return False
     used = np.zeros(n, bool)
     used[F.ravel()] = True
-    ncomp -= int((~used).sum())
-    return len(loops) == 1 and ncomp == 1 and topology.euler_characteristic(F) == 1
+    if int(used.sum()) - n_edges + len(F) != 1:               # the Euler characteristic
+        return False
+    ncomp = connected_components(topology.vertex_adjacency(F, n), directed=False)[0]
+    return ncomp - int((~used).sum()) == 1
 
 
 def twig(edges, start, stop):

@@ -117,14 +117,15 @@ def _seam_halfedges(F, n, seams, strict=True):
     return np.isin(hkey, skey)
 
 
-def cut_along_seams(F, n, seams=None, strict=True):
+def cut_along_seams(F, n, seams=None, strict=True, twin=None):
     """Cut the triangle mesh ``F`` (m,3) with ``n`` vertices along ``seams`` ((k,2) vertex pairs or
     None). The mesh must be manifold and consistently oriented (``check_mesh``). ``strict``: a seam
     that is not an edge of ``F`` is an error (else ignored, e.g. seams outside a selection).
-    Returns ``Cut``."""
+    ``twin`` (3m,) optional: ``topology.twin_halfedges(F, n)``, if the caller has it (repeated cuts
+    of one mesh). Returns ``Cut``."""
     F = np.asarray(F, np.int64)
     m = len(F)
-    tw = topology.twin_halfedges(F, n)
+    tw = topology.twin_halfedges(F, n) if twin is None else twin
     join = (tw >= 0) & ~_seam_halfedges(F, n, seams, strict)
     h = np.nonzero(join)[0]
     ones = np.ones(len(h), np.int8)
