@@ -73,6 +73,7 @@ SWEEP_SEED_RADIUS = 36.0
 FINE_NODES = 4.0
 FINE_WINDOW = 48.0
 FINE_MAX_FACES = 6000
+GAP_GUARD = 'boundary'   # 'boundary' (boundary_bridges) or 'triangles' (bridging_inside, the old guard)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -689,6 +690,150 @@ def bridging_inside(G, F, fine):
     return out
 
 
+GAP_ARC = 2.5   # cells: a grid link whose two ends meet the boundary this far apart along it bridges a gap
+
+
+def _boundary_edges(P, F):
+    """The chart's boundary edges in node coordinates: start ``A`` (e,2), end ``B`` (e,2), arc position
+    of the start along its loop ``s0`` (e,), length ``ln`` (e,), loop ``lid`` (e,), and the loops'
+    lengths (l,) (node units). ``P`` (k,2) vertex node coordinates, ``F`` (m,3)."""
+    from ..mesh.topology import boundary_loops
+    A, B, s0, ln, lid, tot = [], [], [], [], [], []
+    for k, L in enumerate(boundary_loops(F, len(P))):
+        L = np.asarray(L)
+        a, b = P[L], P[np.roll(L, -1)]
+        seg = np.linalg.norm(b - a, axis=1)
+        A.append(a)
+        B.append(b)
+        s0.append(np.r_[0.0, np.cumsum(seg)[:-1]])
+        ln.append(seg)
+        lid.append(np.full(len(L), k))
+        tot.append(seg.sum())
+    if not A:
+        z = np.zeros(0)
+        return np.zeros((0, 2)), np.zeros((0, 2)), z, z, np.zeros(0, np.int64), z
+    return (np.concatenate(A), np.concatenate(B), np.concatenate(s0), np.concatenate(ln),
+            np.concatenate(lid), np.asarray(tot))
+
+
+def _arc_apart(lid_a, s_a, lid_b, s_b, tot, gap):
+    """(q,) bool: boundary points (loop, arc position) farther apart than ``gap`` along the boundary
+    (on different loops: always)."""
+    d = np.abs(s_a - s_b)
+    d = np.minimum(d, tot[lid_a] - d)
+    return (lid_a != lid_b) | (d > gap)
+
+
+def boundary_bridges(G, uv, F, valid, fine, gap=GAP_ARC):
+    """Grid links that cross a gap of the UV domain, found from the boundary itself: the boundary edges'
+    crossings of the grid's links (a horizontal link joins nodes (i, j), (i, j+1); a vertical one (i, j),
+    (i+1, j)), each with its position along its boundary loop (arc length, cells). A link that crosses
+    the boundary twice, at points more than ``gap`` cells apart along it, jumps a gap narrower than a
+    cell (between two parts of the domain, or the two sides of a slit or a tapering notch, however
+    near its tip: the sides' triangles may share the tip vertex there). A rim node (valid, outside)
+    is anchored at its nearest boundary point; it bridges when a link of it crosses the boundary, or
+    reaches another rim node's anchor, more than ``gap`` cells along the boundary from its own anchor.
+
+    ``G`` a rasterised ``Grid`` with its rim, ``uv`` (k,2), ``F`` (m,3) the chart, ``valid`` (ny, nx)
+    the nodes in use, ``fine`` (m,) bool (cells well below the triangle's edges). Returns ``(inside,
+    rim)`` (ny, nx) bool: inside nodes at an end of a bridging link whose triangle is ``fine`` (left out
+    of the march and of sampling), and bridging rim nodes (left out of the march)."""
+    ny, nx = G.shape
+    out_in = np.zeros(G.shape, bool)
+    out_rim = np.zeros(G.shape, bool)
+    P = G.coords(uv)
+    A, B, s0, ln, lid, tot = _boundary_edges(P, F)
+    if not len(A):
+        return out_in, out_rim
+    keys, arcs, lids = [], [], []
+    for ax in (0, 1):
+        # ax 0: rows y = i crossed -> horizontal links keyed by their left node; ax 1: columns x = j
+        # crossed -> vertical links keyed by their lower node (offset by ny * nx)
+        c, o = 1 - ax, ax
+        lo = np.minimum(A[:, c], B[:, c])
+        hi = np.maximum(A[:, c], B[:, c])
+        n0 = np.ceil(lo).astype(np.int64)
+        cnt = np.maximum(np.ceil(hi).astype(np.int64) - n0, 0)
+        e = np.repeat(np.arange(len(A)), cnt)
+        line = n0[e] + np.arange(len(e)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        t = (line - A[e, c]) / (B[e, c] - A[e, c])
+        x = A[e, o] + t * (B[e, o] - A[e, o])
+        other = np.floor(x).astype(np.int64)
+        i, j = (line, other) if ax == 0 else (other, line)
+        ok = (i >= 0) & (i < ny - ax) & (j >= 0) & (j < nx - (1 - ax))
+        keys.append((i * nx + j + ax * ny * nx)[ok])
+        arcs.append((s0[e] + t * ln[e])[ok])
+        lids.append(lid[e][ok])
+    key, arc, lk = np.concatenate(keys), np.concatenate(arcs), np.concatenate(lids)
+    order = np.lexsort((arc, key))
+    key, arc, lk = key[order], arc[order], lk[order]
+
+    def ends(k):
+        """The two end nodes ((rows, cols), (rows, cols)) of links ``k``."""
+        vert = (k >= ny * nx).astype(np.int64)
+        k = k - vert * ny * nx
+        i, j = k // nx, k % nx
+        return (i, j), (i + vert, j + 1 - vert)
+
+    # links crossed twice with the crossings far apart along the boundary
+    same = key[1:] == key[:-1]
+    far = same & _arc_apart(lk[1:], arc[1:], lk[:-1], arc[:-1], tot, gap)
+    bad = np.unique(key[1:][far])
+    face, inside = G.face, G.inside
+    for (i, j) in ends(bad):
+        use = valid[i, j]
+        i, j = i[use], j[use]
+        fin = inside[i, j]
+        f_ok = fine[np.maximum(face[i, j], 0)]
+        out_in[i[fin & f_ok], j[fin & f_ok]] = True
+        out_rim[i[~fin], j[~fin]] = True
+    # rim nodes: anchored at their nearest boundary point
+    ri, rj = np.nonzero(valid & ~inside)
+    if not len(ri):
+        return out_in, out_rim
+    from scipy.spatial import cKDTree
+    m = np.maximum(np.ceil(ln / 0.25).astype(np.int64), 1)
+    e = np.repeat(np.arange(len(A)), m)
+    t = (np.arange(len(e)) - np.repeat(np.cumsum(m) - m, m)) / m[e]
+    pts = A[e] + t[:, None] * (B[e] - A[e])
+    _, near = cKDTree(pts).query(np.c_[rj, ri].astype(np.float64))
+    anc_s = np.full(G.shape, np.nan)
+    anc_l = np.full(G.shape, -1, np.int64)
+    anc_s[ri, rj] = s0[e[near]] + t[near] * ln[e[near]]
+    anc_l[ri, rj] = lid[e[near]]
+    rim = valid & ~inside
+    # links crossed once: the crossing against the rim end's anchor
+    single = np.ones(len(key), bool)
+    single[1:] &= ~same
+    single[:-1] &= ~same
+    (i0, j0), (i1, j1) = ends(key[single])
+    for (a, b) in ((i0, j0), (i1, j1)):
+        r = rim[a, b]
+        hit = r & _arc_apart(anc_l[a, b], np.nan_to_num(anc_s[a, b]), lk[single], arc[single], tot, gap)
+        out_rim[a[hit], b[hit]] = True
+    # rim-rim links not crossed: their anchors far apart
+    crossed = np.zeros(2 * ny * nx, bool)
+    crossed[key] = True
+    for ax in (0, 1):
+        if ax == 0:
+            a_, b_ = (slice(None), slice(None, -1)), (slice(None), slice(1, None))
+            cr = crossed[:ny * nx].reshape(ny, nx)[:, :-1]
+        else:
+            a_, b_ = (slice(None, -1), slice(None)), (slice(1, None), slice(None))
+            cr = crossed[ny * nx:].reshape(ny, nx)[:-1, :]
+        both = rim[a_] & rim[b_] & ~cr
+        ii, jj = np.nonzero(both)
+        if not len(ii):
+            continue
+        la, sa = anc_l[a_][ii, jj], anc_s[a_][ii, jj]
+        lb, sb = anc_l[b_][ii, jj], anc_s[b_][ii, jj]
+        hit = _arc_apart(la, sa, lb, sb, tot, gap)
+        for sl in (a_, b_):
+            sub = out_rim[sl]
+            sub[ii[hit], jj[hit]] = True
+    return out_in, out_rim
+
+
 def sample_corners(G, F, P, fine):
     """(k,4) bool: which of the four bilinear corner nodes of each vertex (node coordinates ``P``
     (k,2)) may give it a value. Where the vertex's triangles are ``fine`` (m,) (cells well below their
@@ -923,9 +1068,12 @@ class Chart:
                 self.ginv = None
         E = mean_edges(self.V, F)
         fine = (G.h / mu_f) < 0.5 * E
-        self.gap = bridging_inside(G, F, fine)
+        gap_in, gap_rim = boundary_bridges(G, uv, F, valid, fine)
+        self.gap = gap_in if GAP_GUARD == 'boundary' else bridging_inside(G, F, fine)
         self.corner_ok = sample_corners(G, F, G.coords(uv), fine)
         self.march_on = valid & ~bridging_rim(G, F, valid) & ~self.gap
+        if GAP_GUARD == 'boundary':
+            self.march_on &= ~gap_rim
         self.metric_passes = METRIC_PASSES if self.ginv is not None else 0
         self.seed_metric = None
         if self.ginv is not None:
