@@ -238,12 +238,12 @@ def test_refined_seed_at_a_strongly_curved_coarse_source():
     mean, mx = rel_errors(V, d, D, s)
     assert mean < 1e-3 and mx < 1e-2, (mean, mx)
     assert (d >= E - 1e-9).all()
-    old = geo.FINE_NODES
+    old = geo.FINE_NODES, geo.FINE_ANISO
     try:
-        geo.FINE_NODES = 0.0
+        geo.FINE_NODES, geo.FINE_ANISO = 0.0, np.inf
         d0, rep0 = gs.distance([s], clamp=False)
     finally:
-        geo.FINE_NODES = old
+        geo.FINE_NODES, geo.FINE_ANISO = old
     assert rep0['refined_sources'] == 0
     assert rel_errors(V, d0, D, s)[0] > 3 * mean
 

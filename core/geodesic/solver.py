@@ -72,7 +72,9 @@ SWEEP_SEED_RADIUS = 36.0
 # radius) of the source, at most FINE_MAX_FACES of them (the nearest).
 FINE_NODES = 4.0
 FINE_WINDOW = 48.0
-FINE_MAX_FACES = 6000
+FINE_MAX_FACES = 3000
+FINE_ANISO = 1.15     # or where a triangle at the source has a metric anisotropy sqrt(l_max / l_min) above
+FINE_EDGES = 16.0     # the window reaches at least this many mean 3D edges of the source's triangles
 GAP_GUARD = 'boundary'   # 'boundary' (boundary_bridges) or 'triangles' (bridging_inside, the old guard)
 
 
@@ -221,7 +223,7 @@ class MeshRelax:
         return max_iter
 
 
-STEINER = 10         # Steiner points per edge in the refined seed's shortest paths (``steiner_distances``)
+STEINER = 16         # Steiner points per edge in the refined seed's shortest paths (``steiner_distances``)
 
 
 def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER):
@@ -243,14 +245,17 @@ def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER):
     pts = np.concatenate([V, P.reshape(-1, 3)])
     pid = n + np.arange(len(ue) * k).reshape(len(ue), k)
     own = np.concatenate([F, pid[inv].reshape(m, 3 * k)], 1)              # (m, 3 + 3k)
-    q = own.shape[1]
-    a = np.repeat(own, q, axis=1).ravel()
-    b = np.tile(own, (1, q)).ravel()
+    # segments inside each triangle between points on two different sides (each such pair belongs to
+    # one triangle only), plus the chain of consecutive points along every edge (once per edge): no
+    # pair appears twice, and the memory is (m (3k+3)^2 / 2) index pairs at most
+    side = np.r_[[0b101, 0b011, 0b110], np.repeat([0b001, 0b010, 0b100], k)]      # sides of each slot
+    ia, ib = np.triu_indices(own.shape[1], 1)
+    cross = (side[ia] & side[ib]) == 0
+    ia, ib = ia[cross], ib[cross]
+    chain = np.concatenate([ue[:, :1], pid, ue[:, 1:]], 1)                         # (e, k+2)
+    a = np.r_[own[:, ia].ravel(), chain[:, :-1].ravel()]
+    b = np.r_[own[:, ib].ravel(), chain[:, 1:].ravel()]
     N = len(pts)
-    keep = a < b
-    # a pair on an edge shared by two triangles appears twice: once (sparse matrices add duplicates)
-    _, first = np.unique(a[keep] * N + b[keep], return_index=True)
-    a, b = a[keep][first], b[keep][first]
     w = np.maximum(np.linalg.norm(pts[a] - pts[b], axis=1), 1e-300)
     if src is not None:
         G = sp.coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(N, N)).tocsr()
@@ -1551,7 +1556,15 @@ class GeodesicSolver:
             E = np.sort(np.concatenate([Fc[:, [0, 1]], Fc[:, [1, 2]], Fc[:, [2, 0]]]), 1)
             key = E[:, 0] * len(ch.V) + E[:, 1]
             u, cnt = np.unique(key, return_counts=True)
-            cache = ch.fine_cache = {'bkeys': u[cnt == 1], 'edge': mean_edges(ch.V, Fc)}
+            aniso = np.ones(len(Fc))
+            if ch.ginv is not None:
+                a, b, c = ch.ginv.T
+                half, dev = (a + c) / 2, np.sqrt(((a - c) / 2) ** 2 + b * b)
+                aniso = np.sqrt((half + dev) / np.maximum(half - dev, 1e-300 * half))
+            W = ch.uv[Fc]
+            uv_edge = (np.linalg.norm(W - np.roll(W, 1, axis=1), axis=2)).mean(1)
+            cache = ch.fine_cache = {'bkeys': u[cnt == 1], 'edge': mean_edges(ch.V, Fc), 'aniso': aniso,
+                                     'uv_edge': uv_edge}
         nV = len(ch.V)
         for i in range(len(S_uv)):
             if i < len(loc):
@@ -1568,13 +1581,18 @@ class GeodesicSolver:
                 continue
             mu_min = float(ch.mu_face[star].min())
             per_edge = float(cache['edge'][star].mean()) * mu_min / h       # nodes per edge at the source
-            if per_edge >= FINE_NODES:
+            if per_edge >= FINE_NODES and not (cache['aniso'][star] > FINE_ANISO).any():
                 continue
+            # the window: triangles within FINE_WINDOW cells (UV) or FINE_EDGES mean edges (3D, the same
+            # at every grid) of the source
             wr = FINE_WINDOW * h
             dist_v = np.linalg.norm(ch.uv - S_uv[i], axis=1)
-            fsel = np.flatnonzero((dist_v[ch.F] <= wr).any(1))
-            if len(fsel) > FINE_MAX_FACES:              # the nearest triangles only
-                dmin = dist_v[ch.F[fsel]].min(1)
+            dist_3 = np.linalg.norm(ch.V - Xs, axis=1)
+            # (not on a similarity chart: its straight chart segments are exact, the Steiner paths not)
+            r3 = FINE_EDGES * float(cache['edge'][star].mean()) if ch.ginv is not None else -1.0
+            fsel = np.flatnonzero((dist_v[ch.F] <= wr).any(1) | (dist_3[ch.F] <= r3).any(1))
+            if len(fsel) > FINE_MAX_FACES:              # the nearest triangles (3D) only
+                dmin = dist_3[ch.F[fsel]].min(1)
                 fsel = np.sort(fsel[np.argsort(dmin, kind='stable')[:FINE_MAX_FACES]])
             fsel = np.union1d(fsel, star)
             # the connected part of the window that holds the source
@@ -1616,10 +1634,9 @@ class GeodesicSolver:
             tau = min(tau, float(np.max(dv[sv][np.isfinite(dv[sv])])))
             # the chart's grid nodes in the window: the shortest path to a point on their triangle's
             # boundary, then the straight segment inside the triangle
-            c = G.coords(S_uv[i:i + 1])[0]
-            r = wr / h + 2
-            i0, i1 = max(int(c[1] - r), 0), min(int(c[1] + r) + 1, G.shape[0])
-            j0, j1 = max(int(c[0] - r), 0), min(int(c[0] + r) + 1, G.shape[1])
+            box = G.coords(ch.uv[np.unique(Fw)])
+            i0, i1 = max(int(box[:, 1].min()) - 1, 0), min(int(box[:, 1].max()) + 2, G.shape[0])
+            j0, j1 = max(int(box[:, 0].min()) - 1, 0), min(int(box[:, 0].max()) + 2, G.shape[1])
             ii, jj = np.mgrid[i0:i1, j0:j1]
             ii, jj = ii.ravel(), jj.ravel()
             fnode = G.face[ii, jj]
@@ -1628,8 +1645,15 @@ class GeodesicSolver:
             ok = (fnode >= 0) & (row[np.maximum(fnode, 0)] >= 0) & ch.valid[ii, jj]
             ii, jj, fnode = ii[ok], jj[ok], fnode[ok]
             X, _ = ch.node_points(ii, jj)
-            cand = own[row[fnode]]                                            # (q, 3 + 3 STEINER)
-            val = (dS[cand] + np.linalg.norm(pts3[cand] - X[:, None], axis=2)).min(1)
+            # only nodes that can lie within tau (their 3D distance bounds the geodesic one from below),
+            # with a margin of cells for the level set's outer side; in chunks (q nodes x 3 + 3 STEINER)
+            near = np.linalg.norm(X - Xs, axis=1) <= tau + 4.0 * h / mu_min
+            ii, jj, fnode, X = ii[near], jj[near], fnode[near], X[near]
+            val = np.empty(len(ii))
+            for c0 in range(0, len(ii), 20_000):
+                sl = slice(c0, c0 + 20_000)
+                cand = own[row[fnode[sl]]]
+                val[sl] = (dS[cand] + np.linalg.norm(pts3[cand] - X[sl, None], axis=2)).min(1)
             Tn = np.full(G.shape, np.inf)
             Tn[ii, jj] = val
             tv = np.full(nV, np.inf)
