@@ -616,3 +616,35 @@ def test_a_closed_part_needs_seams_or_sphere_mode():
     with pytest.raises(ConformalError) as exc:
         geo.geodesic_distance(V, F, [0], grid=256)
     assert exc.value.code == 'no_boundary' and 'sphere' in str(exc.value)
+
+
+def slit_disk(nr=30, nphi=160, wedge=0.08):
+    """A unit disk minus a thin wedge (angle ``wedge``) with its tip at the centre: a slit that tapers
+    to nothing, narrower than a grid cell near its tip, where the triangles of both sides share the
+    centre vertex. Polar rings, (n,3) and (m,3)."""
+    r = np.linspace(0, 1, nr + 1)[1:]
+    phi = np.linspace(wedge / 2, 2 * np.pi - wedge / 2, nphi + 1)
+    R, P = np.meshgrid(r, phi, indexing='ij')
+    V = np.r_[[[0.0, 0.0, 0.0]], np.c_[(R * np.cos(P)).ravel(), (R * np.sin(P)).ravel(), np.zeros(R.size)]]
+    idx = 1 + np.arange(R.size).reshape(R.shape)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    F = np.concatenate([np.c_[np.zeros(nphi, int), idx[0, :-1], idx[0, 1:]], np.c_[a, c, d], np.c_[a, d, b]])
+    return V, F
+
+
+def test_the_front_does_not_cross_a_tapering_slit():
+    """Across the slit the exact distance runs round its tip (the centre): the straight segment where
+    the angle between source and target within the domain is below pi, else through the centre. With
+    the gap guard from the boundary (``boundary_bridges``) no vertex is below it (the guard from shared
+    triangle corners let the front jump the slit near its tip: 5.7 % below, 0.46 % mean at 1024)."""
+    V, F = slit_disk()
+    ang = np.mod(np.arctan2(V[:, 1], V[:, 0]), 2 * np.pi)
+    rad = np.linalg.norm(V[:, :2], axis=1)
+    s = int(np.argmin(np.linalg.norm(V[:, :2] - 0.6 * np.array([np.cos(0.25), np.sin(0.25)]), axis=1)))
+    D = np.where(np.abs(ang - ang[s]) < np.pi, np.linalg.norm(V[:, :2] - V[s, :2], axis=1), rad + rad[s])
+    far = np.linalg.norm(V - V[s], axis=1) > 0.05
+    d, rep = geo.geodesic_distance(V, F, [s], uv=V[:, :2], grid=1024)
+    r = (d - D)[far] / D[far]
+    assert r.min() > -1e-3, r.min()                    # measured 0.000 %
+    assert np.abs(r).mean() < 1.5e-3 and np.abs(r).max() < 1e-2, (np.abs(r).mean(), np.abs(r).max())
+    assert not rep['filled_from_edges']

@@ -75,7 +75,6 @@ FINE_WINDOW = 48.0
 FINE_MAX_FACES = 3000
 FINE_ANISO = 1.15     # or where a triangle at the source has a metric anisotropy sqrt(l_max / l_min) above
 FINE_EDGES = 16.0     # the window reaches at least this many mean 3D edges of the source's triangles
-GAP_GUARD = 'boundary'   # 'boundary' (boundary_bridges) or 'triangles' (bridging_inside, the old guard)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -669,32 +668,6 @@ def bridging_rim(G, F, valid):
     return out
 
 
-def bridging_inside(G, F, fine):
-    """(ny, nx) bool: inside nodes that face a node of another part of the domain across a gap
-    narrower than a cell (a 4-neighbour whose triangle shares no vertex with the node's own), where
-    both triangles are ``fine`` (m,) bool (the cell is well below their edges, so neighbouring
-    nodes of one part lie in the same or touching triangles). Both nodes of such a pair are left
-    out of the march, so that the front does not jump the gap. ``G`` a rasterised ``Grid``, ``F``
-    (m,3) the chart's triangles."""
-    face, inside = G.face, G.inside
-    out = np.zeros(face.shape, bool)
-    for a, b in (((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
-                 ((slice(None, -1), slice(None)), (slice(1, None), slice(None)))):
-        fa, fb = face[a], face[b]
-        both = inside[a] & inside[b] & (fa != fb)
-        ii, jj = np.nonzero(both)
-        if not len(ii):
-            continue
-        ta, tb = fa[ii, jj], fb[ii, jj]
-        use = fine[ta] & fine[tb]
-        share = (F[ta][:, :, None] == F[tb][:, None, :]).any((1, 2))
-        gap = use & ~share
-        for sl in (a, b):
-            sub = out[sl]
-            sub[ii[gap], jj[gap]] = True
-    return out
-
-
 GAP_ARC = 2.5   # cells: a grid link whose two ends meet the boundary this far apart along it bridges a gap
 
 
@@ -1074,11 +1047,9 @@ class Chart:
         E = mean_edges(self.V, F)
         fine = (G.h / mu_f) < 0.5 * E
         gap_in, gap_rim = boundary_bridges(G, uv, F, valid, fine)
-        self.gap = gap_in if GAP_GUARD == 'boundary' else bridging_inside(G, F, fine)
+        self.gap = gap_in
         self.corner_ok = sample_corners(G, F, G.coords(uv), fine)
-        self.march_on = valid & ~bridging_rim(G, F, valid) & ~self.gap
-        if GAP_GUARD == 'boundary':
-            self.march_on &= ~gap_rim
+        self.march_on = valid & ~bridging_rim(G, F, valid) & ~self.gap & ~gap_rim
         self.metric_passes = METRIC_PASSES if self.ginv is not None else 0
         self.seed_metric = None
         if self.ginv is not None:
