@@ -74,6 +74,7 @@ FINE_NODES = 4.0
 FINE_WINDOW = 48.0
 FINE_MAX_FACES = 3000
 FINE_ANISO = 1.15     # or where a triangle at the source has a metric anisotropy sqrt(l_max / l_min) above
+FINE_BAND = 8.0      # cells (at the node's own mu) inside tau where grid nodes take every Steiner path
 FINE_EDGES = 16.0     # the window reaches at least this many mean 3D edges of the source's triangles
 
 
@@ -1605,24 +1606,41 @@ class GeodesicSolver:
             tau = min(tau, float(np.max(dv[sv][np.isfinite(dv[sv])])))
             # the chart's grid nodes in the window: the shortest path to a point on their triangle's
             # boundary, then the straight segment inside the triangle
-            box = G.coords(ch.uv[np.unique(Fw)])
-            i0, i1 = max(int(box[:, 1].min()) - 1, 0), min(int(box[:, 1].max()) + 2, G.shape[0])
-            j0, j1 = max(int(box[:, 0].min()) - 1, 0), min(int(box[:, 0].max()) + 2, G.shape[1])
-            ii, jj = np.mgrid[i0:i1, j0:j1]
-            ii, jj = ii.ravel(), jj.ravel()
+            # the window's grid nodes (valid nodes of its triangles, rim nodes included), from the
+            # chart's nodes sorted by triangle (computed once per chart)
+            if 'node_order' not in cache:
+                fl = G.face.ravel()
+                order = np.argsort(fl, kind='stable')
+                cache['node_order'] = order
+                cache['face_start'] = np.searchsorted(fl[order], np.arange(len(ch.F) + 1))
+            st = cache['face_start']
+            cnt = st[fsel + 1] - st[fsel]
+            at = np.repeat(st[fsel] - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
+            flat = cache['node_order'][at]
+            ii, jj = flat // G.shape[1], flat % G.shape[1]
             fnode = G.face[ii, jj]
             row = np.full(len(ch.F), -1, np.int64)
             row[fsel] = np.arange(len(fsel))
-            ok = (fnode >= 0) & (row[np.maximum(fnode, 0)] >= 0) & ch.valid[ii, jj]
+            ok = ch.valid[ii, jj]
             ii, jj, fnode = ii[ok], jj[ok], fnode[ok]
             X, _ = ch.node_points(ii, jj)
             # only nodes that can lie within tau (their 3D distance bounds the geodesic one from below),
             # with a margin of cells for the level set's outer side; in chunks (q nodes x 3 + 3 STEINER)
             near = np.linalg.norm(X - Xs, axis=1) <= tau + 4.0 * h / mu_min
             ii, jj, fnode, X = ii[near], jj[near], fnode[near], X[near]
-            val = np.empty(len(ii))
-            for c0 in range(0, len(ii), 20_000):
-                sl = slice(c0, c0 + 20_000)
+            # the path through a corner of the node's triangle first (an upper bound): nodes it puts
+            # more than a band of cells inside tau are deep in the seed, where only the front's start
+            # matters, and keep it; the others take every point of their triangle's boundary
+            corner = own[row[fnode], :3]
+            to_corner = np.linalg.norm(pts3[corner] - X[:, None], axis=2)
+            val = (dS[corner] + to_corner).min(1)
+            # a node whose distance is more than 4 of its cells beyond tau (the corner's distance less the
+            # straight segment to it bounds it from below) only gets the far level-set value: inf
+            cell = h / ch.mu_face[fnode]
+            val = np.where((dS[corner] - to_corner).max(1) > tau + 4.0 * cell, np.inf, val)
+            band = np.flatnonzero(np.isfinite(val) & (val > tau - FINE_BAND * cell))
+            for c0 in range(0, len(band), 20_000):
+                sl = band[c0:c0 + 20_000]
                 cand = own[row[fnode[sl]]]
                 val[sl] = (dS[cand] + np.linalg.norm(pts3[cand] - X[sl, None], axis=2)).min(1)
             Tn = np.full(G.shape, np.inf)
