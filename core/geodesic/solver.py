@@ -33,7 +33,8 @@ A query (``GeodesicSolver.distance``):
    A seed node takes the chart time only if the straight UV segment stays in the domain (``_visible``).
 5. March with scikit-fmm ``travel_time(order=2)`` or, without scikit-fmm, the numpy fast sweeping
    solver of ``core.geodesic.eikonal``, without the rim nodes that bridge gaps of the domain
-   (``bridging_rim``; they get extrapolated times, ``extrapolate_rim``). Sources whose ``mu`` differ
+   (``bridging_rim``, ``boundary_bridges``: links that cross the boundary twice far apart along it;
+   they get extrapolated times, ``extrapolate_rim``). Sources whose ``mu`` differ
    by more than a factor 2 march separately and the minimum is taken. With ``mu_mode='metric'`` (the
    default) the march is repeated with the exact metric of the map: the map is affine on each
    triangle, so the surface length of a UV step ``du`` is ``sqrt(du^T G du)`` with one constant
@@ -1540,14 +1541,17 @@ class GeodesicSolver:
     def _fine_seed(self, ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius, calibrate):
         """Refined seeds (docs/geodesic.md, "Refined seed"). Where the chart's cell at a source is coarse
         in surface units (``h / mu`` above ``1 / FINE_NODES`` of the mean edge of the source's triangles,
-        ``mu`` the smallest of theirs), the grid cannot resolve the map's per-triangle metric near the
-        source, and its isotropic or directional speeds leave a deficit that travels outward. There the
-        seed takes shortest paths on the mesh through ``STEINER`` points per edge
-        (``steiner_distances``) over the triangles within ``FINE_WINDOW`` cells (UV) of the source (the
-        connected part holding it, at most ``FINE_MAX_FACES``). They are exact to the Steiner paths'
-        small excess up to ``tau``, the 3D distance from the source to the window's cut boundary: no
-        geodesic shorter than that leaves the window. A grid node takes the shortest path to a point of
-        its triangle's boundary plus the straight segment to it in the triangle.
+        ``mu`` the smallest of theirs), or a triangle at the source has a metric anisotropy
+        ``sqrt(l_max / l_min)`` above ``FINE_ANISO``, the grid's isotropic or directional speeds leave a
+        deficit near the source that travels outward. There the seed takes shortest paths on the mesh
+        through ``STEINER`` points per edge, Richardson-extrapolated (``steiner_distances``), over the
+        triangles within ``FINE_WINDOW`` cells (UV) or ``FINE_EDGES`` mean 3D edges (not on a
+        similarity chart) of the source (the connected part holding it, at most ``FINE_MAX_FACES``, the
+        nearest in 3D). They hold up to ``tau``, the 3D distance from the source to the window's cut
+        boundary: no geodesic shorter than that leaves the window. A grid node within ``FINE_BAND`` of
+        its cells inside ``tau`` takes the shortest path to a point of its triangle's boundary plus the
+        straight segment to it in the triangle; deeper nodes the path through a corner; nodes more than
+        4 cells beyond ``tau`` inf.
 
         ``S_uv`` (q,2) the sources' UV positions (vertex sources ``loc`` (a,) first, then points in the
         local faces ``src_faces`` (b,)). Returns a list (q,) of None (not refined) or ``(Tn, tv, tau,
