@@ -6,6 +6,7 @@ the heat method (potpourri3d, or the three sparse solves in ``heat_method`` when
     .venv/bin/python bench/geodesic_real.py --quick          # fewer meshes and grids
     .venv/bin/python bench/geodesic_real.py --calibrate      # rows for the error-model fit (JSON)
     .venv/bin/python bench/geodesic_real.py --meshes woody bump
+    .venv/bin/python bench/geodesic_real.py --meshes alligator --grids --no-plot --where 8   # worst vertices
 
 Meshes: the generated surfaces of ``core.surfaces`` and every mesh of ``meshes.corpus_dir()`` (outside the
 repository; the script says so and skips them if that folder is missing) that the tool handles as
@@ -41,6 +42,7 @@ MESH_DIR = corpus_dir()
 OUT = os.path.join(ROOT, 'out', 'geodesic_real')
 EXCLUDE = 0.02
 SKIP_DEFAULT = False   # --skip-default: the first of --grids instead of the automatic grid
+WHERE = 0              # --where K: print our K worst vertices per source set and what they lie in
 REAL = ['woody', 'alligator', 'suzanne', 'teapot', 'spot', 'stanford-bunny', 'cow', 'ogre']
 SURF = ['bump', 'bump3', 'edgebump', 'ridge', 'saddle', 'waves', 'cliff', 'blob']
 HEADER = ('| mesh | method | grid | mean % central | far | curvature | multi | max % | below Euclid / above '
@@ -282,6 +284,43 @@ def bounds_violations(d, Vs, src, upper, keep):
     return int(below.sum()), int(above.sum())
 
 
+def where_worst(name, grid, solver, sets, D, keep, dists, bnd, k):
+    """Print the ``k`` vertices of largest relative error of our solver per source set, and what sets them
+    apart: signed error, exact distance, 3D distance to the nearest source over the part's diagonal,
+    boundary vertex, on-mesh (``MeshRelax``) vertex, largest surface cell over edge of its triangles
+    (above ``UNRESOLVED`` = on-mesh), largest metric anisotropy ``sqrt(l_max / l_min)`` of its
+    triangles, and the split vertex index. ``dists`` {set: (N,) on the split mesh}."""
+    from core.geodesic.solver import mean_edges
+    Vs = solver.Vs
+    info = np.full((len(Vs), 3), np.nan)                  # on-mesh, cell/edge, anisotropy per split vertex
+    for ch in solver.charts:
+        ratio = (ch.grid.h / ch.mu_face) / mean_edges(ch.V, ch.F)
+        an = np.ones(len(ch.F))
+        if ch.ginv is not None:
+            a, b, c = ch.ginv.T
+            half, dev = (a + c) / 2, np.sqrt(((a - c) / 2) ** 2 + b * b)
+            an = np.sqrt((half + dev) / np.maximum(half - dev, 1e-300 * half))
+        r = np.zeros(len(ch.V))
+        q = np.ones(len(ch.V))
+        np.maximum.at(r, ch.F.ravel(), np.repeat(ratio, 3))
+        np.maximum.at(q, ch.F.ravel(), np.repeat(an, 3))
+        free = ch.free if ch.free is not None else np.zeros(len(ch.V), bool)
+        info[ch.verts] = np.c_[free, r, q]
+    part = max(solver.charts, key=lambda c: len(c.verts)).verts
+    diag = float(np.linalg.norm(np.ptp(Vs[part], axis=0)))
+    for s_ in SETS:
+        kk = np.flatnonzero(keep[s_])
+        r = (dists[s_][kk] - D[s_][kk]) / D[s_][kk]
+        E = np.min(np.linalg.norm(Vs[kk, None, :] - Vs[sets[s_]][None], axis=2), axis=1)
+        print(f"# {name} grid {grid} {s_}: worst vertices (signed error %, exact, 3D distance / diagonal, "
+              "boundary, on-mesh, cell/edge, anisotropy)", flush=True)
+        for i in np.argsort(-np.abs(r))[:k]:
+            v = kk[i]
+            print(f"#   v{v}: {100 * r[i]:+.3f} % exact {D[s_][v]:.4g} near {E[i] / diag:.3f} "
+                  f"boundary {bool(bnd[v])} on-mesh {bool(info[v, 0])} cell/edge {info[v, 1]:.2f} "
+                  f"anisotropy {info[v, 2]:.3f}", flush=True)
+
+
 def run_mesh(name, grids, rows, calib, plot, sphere=False):
     """Every source set on one mesh: our solver at its default grid and at ``grids``, the heat method,
     mesh fast marching, all against MMP. Appends rows (dicts) to ``rows``."""
@@ -365,6 +404,8 @@ def run_mesh(name, grids, rows, calib, plot, sphere=False):
     d, tq, rep = ours(gs)
     label = 'ours' if SKIP_DEFAULT else 'ours default'
     evaluate(f'ours default ({g_def})', label, g_def, d, t_setup, tq, rep)
+    if WHERE:
+        where_worst(name, g_def, gs, sets, D, keep, d, bnd, WHERE)
     calib.append({'mesh': name, 'grid': g_def, 'cell': ch.cell, 'reflex': ch.reflex,
                   'mean': results[f'ours default ({g_def})']['mean'], 'estimate': rep['estimate']})
     for g in grids:
@@ -375,6 +416,8 @@ def run_mesh(name, grids, rows, calib, plot, sphere=False):
         ts = time.perf_counter() - t
         d, tq, rep = ours(gg)
         evaluate(f'ours {g}', 'ours', g, d, ts, tq, rep)
+        if WHERE:
+            where_worst(name, g, gg, sets, D, keep, d, bnd, WHERE)
     for aname, d, setup, tq in anchor_runs(Vs, Fs, sets, reduce):
         evaluate(aname, aname, '-', d, setup, tq)
     rows.append({'mesh': name, 'verts': len(V), 'tris': len(F), 'method': 'exact MMP', 'grid': '-',
@@ -490,9 +533,13 @@ def main():
     ap.add_argument('--no-plot', action='store_true')
     ap.add_argument('--skip-default', action='store_true',
                     help='do not run the automatic grid (the first of --grids takes its place)')
+    ap.add_argument('--where', type=int, default=0, metavar='K',
+                    help='print our K worst vertices per source set and what they lie in (boundary, '
+                         'on-mesh, cell/edge, anisotropy)')
     a = ap.parse_args()
-    global SKIP_DEFAULT
+    global SKIP_DEFAULT, WHERE
     SKIP_DEFAULT = a.skip_default
+    WHERE = a.where
     if not os.path.isdir(MESH_DIR):
         print(f"# {MESH_DIR} is missing: only the generated surfaces are measured")
     names = a.meshes if a.meshes is not None else (['bump', 'edgebump', 'woody', 'spot'] if a.quick

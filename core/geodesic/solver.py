@@ -33,7 +33,8 @@ A query (``GeodesicSolver.distance``):
    A seed node takes the chart time only if the straight UV segment stays in the domain (``_visible``).
 5. March with scikit-fmm ``travel_time(order=2)`` or, without scikit-fmm, the numpy fast sweeping
    solver of ``core.geodesic.eikonal``, without the rim nodes that bridge gaps of the domain
-   (``bridging_rim``; they get extrapolated times, ``extrapolate_rim``). Sources whose ``mu`` differ
+   (``bridging_rim``, ``boundary_bridges``: links that cross the boundary twice far apart along it;
+   they get extrapolated times, ``extrapolate_rim``). Sources whose ``mu`` differ
    by more than a factor 2 march separately and the minimum is taken. With ``mu_mode='metric'`` (the
    default) the march is repeated with the exact metric of the map: the map is affine on each
    triangle, so the surface length of a UV step ``du`` is ``sqrt(du^T G du)`` with one constant
@@ -72,7 +73,10 @@ SWEEP_SEED_RADIUS = 36.0
 # radius) of the source, at most FINE_MAX_FACES of them (the nearest).
 FINE_NODES = 4.0
 FINE_WINDOW = 48.0
-FINE_MAX_FACES = 6000
+FINE_MAX_FACES = 3000
+FINE_ANISO = 1.15     # or where a triangle at the source has a metric anisotropy sqrt(l_max / l_min) above
+FINE_BAND = 8.0      # cells (at the node's own mu) inside tau where grid nodes take every Steiner path
+FINE_EDGES = 16.0     # the window reaches at least this many mean 3D edges of the source's triangles
 
 
 # --------------------------------------------------------------------------------------------------
@@ -220,10 +224,11 @@ class MeshRelax:
         return max_iter
 
 
-STEINER = 10         # Steiner points per edge in the refined seed's shortest paths (``steiner_distances``)
+STEINER_ORDER = 1.85  # the Steiner paths' excess falls as k^-1.85 (measured on spot: k = 4, 10, 16, 30)
+STEINER = 15         # Steiner points per edge in the refined seed's shortest paths (``steiner_distances``)
 
 
-def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER):
+def _steiner_graph(V, F, src=None, X=None, src_faces=None, k=STEINER):
     """Shortest paths on the surface of the triangles ``F`` (m,3) (vertices ``V`` (n,3)) from a source
     vertex ``src`` or a point ``X`` (3,) in the triangles ``src_faces``, through ``k`` Steiner points on
     every edge: a graph joining every pair of points (vertices and Steiner points) on the boundary of
@@ -242,14 +247,17 @@ def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER):
     pts = np.concatenate([V, P.reshape(-1, 3)])
     pid = n + np.arange(len(ue) * k).reshape(len(ue), k)
     own = np.concatenate([F, pid[inv].reshape(m, 3 * k)], 1)              # (m, 3 + 3k)
-    q = own.shape[1]
-    a = np.repeat(own, q, axis=1).ravel()
-    b = np.tile(own, (1, q)).ravel()
+    # segments inside each triangle between points on two different sides (each such pair belongs to
+    # one triangle only), plus the chain of consecutive points along every edge (once per edge): no
+    # pair appears twice, and the memory is (m (3k+3)^2 / 2) index pairs at most
+    side = np.r_[[0b101, 0b011, 0b110], np.repeat([0b001, 0b010, 0b100], k)]      # sides of each slot
+    ia, ib = np.triu_indices(own.shape[1], 1)
+    cross = (side[ia] & side[ib]) == 0
+    ia, ib = ia[cross], ib[cross]
+    chain = np.concatenate([ue[:, :1], pid, ue[:, 1:]], 1)                         # (e, k+2)
+    a = np.r_[own[:, ia].ravel(), chain[:, :-1].ravel()]
+    b = np.r_[own[:, ib].ravel(), chain[:, 1:].ravel()]
     N = len(pts)
-    keep = a < b
-    # a pair on an edge shared by two triangles appears twice: once (sparse matrices add duplicates)
-    _, first = np.unique(a[keep] * N + b[keep], return_index=True)
-    a, b = a[keep][first], b[keep][first]
     w = np.maximum(np.linalg.norm(pts[a] - pts[b], axis=1), 1e-300)
     if src is not None:
         G = sp.coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(N, N)).tocsr()
@@ -260,6 +268,38 @@ def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER):
         G = sp.coo_matrix((np.r_[w, w, wx], (np.r_[a, b, np.full(len(cand), N)], np.r_[b, a, cand])),
                           shape=(N + 1, N + 1)).tocsr()
         dS = dijkstra(G, directed=True, indices=N)[:N]
+    return dS, pts, own, ue, pid
+
+
+def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapolate=False):
+    """Shortest paths on the surface of the triangles ``F`` (m,3) (vertices ``V`` (n,3)) from a source
+    vertex ``src`` or a point ``X`` (3,) in the triangles ``src_faces``, through ``k`` Steiner points on
+    every edge: a graph joining every pair of points (vertices and Steiner points) on the boundary of
+    each triangle by the straight segment inside it. Each graph path is a path on the surface, so the
+    distances are upper bounds of the geodesic ones, and tend to them as ``k`` grows (docs/geodesic.md,
+    "Refined seed"). ``extrapolate`` (``k`` odd): also the graph of ``(k - 1) / 2`` points per edge (its
+    points are every second one of the first), and the excess ``d_k - d`` taken as ``(d_(k-1)/2 - d_k) /
+    (2^STEINER_ORDER - 1)`` at the shared points, linearly interpolated along the edge between them
+    (Richardson's extrapolation: no longer an upper bound, about 8x closer on spot, bunny, edgebump).
+    Returns ``(dv (n,) at the vertices, inf off F; dS (p,) at every graph point; P (p,3) the points;
+    own (m, 3 + 3k) the points on each triangle's boundary)``."""
+    n = len(V)
+    dS, pts, own, ue, pid = _steiner_graph(V, F, src, X, src_faces, k)
+    if extrapolate and k >= 3 and k % 2 == 1:
+        j = (k - 1) // 2
+        dC, _, _, ueC, pidC = _steiner_graph(V, F, src, X, src_faces, j)
+        # the coarse graph's points: the vertices and fine points 1, 3, ... (0-based) of every edge, in the
+        # same edge order (both from np.unique of the same sorted edges)
+        fine_at = np.full(len(dC), -1, np.int64)
+        fine_at[:n] = np.arange(n)
+        fine_at[pidC.ravel()] = pid[:, 1::2].ravel()
+        ok = np.isfinite(dC) & np.isfinite(dS[fine_at])
+        corr = np.zeros(len(dS))
+        corr[fine_at[ok]] = (dC[ok] - dS[fine_at[ok]]) / (2.0 ** STEINER_ORDER - 1.0)
+        # fine points 0, 2, ..., k-1 of each edge: the mean of their two neighbours (vertex or shared point)
+        chain = np.concatenate([ue[:, :1], pid, ue[:, 1:]], 1)                     # (e, k+2)
+        corr[chain[:, 1:-1:2]] = 0.5 * (corr[chain[:, 0:-2:2]] + corr[chain[:, 2::2]])
+        dS = dS - np.maximum(corr, 0.0)
     dv = np.full(n, np.inf)
     used = np.unique(F)
     dv[used] = dS[used]
@@ -663,30 +703,148 @@ def bridging_rim(G, F, valid):
     return out
 
 
-def bridging_inside(G, F, fine):
-    """(ny, nx) bool: inside nodes that face a node of another part of the domain across a gap
-    narrower than a cell (a 4-neighbour whose triangle shares no vertex with the node's own), where
-    both triangles are ``fine`` (m,) bool (the cell is well below their edges, so neighbouring
-    nodes of one part lie in the same or touching triangles). Both nodes of such a pair are left
-    out of the march, so that the front does not jump the gap. ``G`` a rasterised ``Grid``, ``F``
-    (m,3) the chart's triangles."""
+GAP_ARC = 2.5   # cells: a grid link whose two ends meet the boundary this far apart along it bridges a gap
+
+
+def _boundary_edges(P, F):
+    """The chart's boundary edges in node coordinates: start ``A`` (e,2), end ``B`` (e,2), arc position
+    of the start along its loop ``s0`` (e,), length ``ln`` (e,), loop ``lid`` (e,), and the loops'
+    lengths (l,) (node units). ``P`` (k,2) vertex node coordinates, ``F`` (m,3)."""
+    from ..mesh.topology import boundary_loops
+    A, B, s0, ln, lid, tot = [], [], [], [], [], []
+    for k, L in enumerate(boundary_loops(F, len(P))):
+        L = np.asarray(L)
+        a, b = P[L], P[np.roll(L, -1)]
+        seg = np.linalg.norm(b - a, axis=1)
+        A.append(a)
+        B.append(b)
+        s0.append(np.r_[0.0, np.cumsum(seg)[:-1]])
+        ln.append(seg)
+        lid.append(np.full(len(L), k))
+        tot.append(seg.sum())
+    if not A:
+        z = np.zeros(0)
+        return np.zeros((0, 2)), np.zeros((0, 2)), z, z, np.zeros(0, np.int64), z
+    return (np.concatenate(A), np.concatenate(B), np.concatenate(s0), np.concatenate(ln),
+            np.concatenate(lid), np.asarray(tot))
+
+
+def _arc_apart(lid_a, s_a, lid_b, s_b, tot, gap):
+    """(q,) bool: boundary points (loop, arc position) farther apart than ``gap`` along the boundary
+    (on different loops: always)."""
+    d = np.abs(s_a - s_b)
+    d = np.minimum(d, tot[lid_a] - d)
+    return (lid_a != lid_b) | (d > gap)
+
+
+def boundary_bridges(G, uv, F, valid, fine, gap=GAP_ARC):
+    """Grid links that cross a gap of the UV domain, found from the boundary itself: the boundary edges'
+    crossings of the grid's links (a horizontal link joins nodes (i, j), (i, j+1); a vertical one (i, j),
+    (i+1, j)), each with its position along its boundary loop (arc length, cells). A link that crosses
+    the boundary twice, at points more than ``gap`` cells apart along it, jumps a gap narrower than a
+    cell (between two parts of the domain, or the two sides of a slit or a tapering notch, however
+    near its tip: the sides' triangles may share the tip vertex there). A rim node (valid, outside)
+    is anchored at its nearest boundary point; it bridges when a link of it crosses the boundary, or
+    reaches another rim node's anchor, more than ``gap`` cells along the boundary from its own anchor.
+
+    ``G`` a rasterised ``Grid`` with its rim, ``uv`` (k,2), ``F`` (m,3) the chart, ``valid`` (ny, nx)
+    the nodes in use, ``fine`` (m,) bool (cells well below the triangle's edges). Returns ``(inside,
+    rim)`` (ny, nx) bool: inside nodes at an end of a bridging link whose triangle is ``fine`` (left out
+    of the march and of sampling), and bridging rim nodes (left out of the march)."""
+    ny, nx = G.shape
+    out_in = np.zeros(G.shape, bool)
+    out_rim = np.zeros(G.shape, bool)
+    P = G.coords(uv)
+    A, B, s0, ln, lid, tot = _boundary_edges(P, F)
+    if not len(A):
+        return out_in, out_rim
+    keys, arcs, lids = [], [], []
+    for ax in (0, 1):
+        # ax 0: rows y = i crossed -> horizontal links keyed by their left node; ax 1: columns x = j
+        # crossed -> vertical links keyed by their lower node (offset by ny * nx)
+        c, o = 1 - ax, ax
+        lo = np.minimum(A[:, c], B[:, c])
+        hi = np.maximum(A[:, c], B[:, c])
+        n0 = np.ceil(lo).astype(np.int64)
+        cnt = np.maximum(np.ceil(hi).astype(np.int64) - n0, 0)
+        e = np.repeat(np.arange(len(A)), cnt)
+        line = n0[e] + np.arange(len(e)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        t = (line - A[e, c]) / (B[e, c] - A[e, c])
+        x = A[e, o] + t * (B[e, o] - A[e, o])
+        other = np.floor(x).astype(np.int64)
+        i, j = (line, other) if ax == 0 else (other, line)
+        ok = (i >= 0) & (i < ny - ax) & (j >= 0) & (j < nx - (1 - ax))
+        keys.append((i * nx + j + ax * ny * nx)[ok])
+        arcs.append((s0[e] + t * ln[e])[ok])
+        lids.append(lid[e][ok])
+    key, arc, lk = np.concatenate(keys), np.concatenate(arcs), np.concatenate(lids)
+    order = np.lexsort((arc, key))
+    key, arc, lk = key[order], arc[order], lk[order]
+
+    def ends(k):
+        """The two end nodes ((rows, cols), (rows, cols)) of links ``k``."""
+        vert = (k >= ny * nx).astype(np.int64)
+        k = k - vert * ny * nx
+        i, j = k // nx, k % nx
+        return (i, j), (i + vert, j + 1 - vert)
+
+    # links crossed twice with the crossings far apart along the boundary
+    same = key[1:] == key[:-1]
+    far = same & _arc_apart(lk[1:], arc[1:], lk[:-1], arc[:-1], tot, gap)
+    bad = np.unique(key[1:][far])
     face, inside = G.face, G.inside
-    out = np.zeros(face.shape, bool)
-    for a, b in (((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
-                 ((slice(None, -1), slice(None)), (slice(1, None), slice(None)))):
-        fa, fb = face[a], face[b]
-        both = inside[a] & inside[b] & (fa != fb)
+    for (i, j) in ends(bad):
+        use = valid[i, j]
+        i, j = i[use], j[use]
+        fin = inside[i, j]
+        f_ok = fine[np.maximum(face[i, j], 0)]
+        out_in[i[fin & f_ok], j[fin & f_ok]] = True
+        out_rim[i[~fin], j[~fin]] = True
+    # rim nodes: anchored at their nearest boundary point
+    ri, rj = np.nonzero(valid & ~inside)
+    if not len(ri):
+        return out_in, out_rim
+    from scipy.spatial import cKDTree
+    m = np.maximum(np.ceil(ln / 0.25).astype(np.int64), 1)
+    e = np.repeat(np.arange(len(A)), m)
+    t = (np.arange(len(e)) - np.repeat(np.cumsum(m) - m, m)) / m[e]
+    pts = A[e] + t[:, None] * (B[e] - A[e])
+    _, near = cKDTree(pts).query(np.c_[rj, ri].astype(np.float64))
+    anc_s = np.full(G.shape, np.nan)
+    anc_l = np.full(G.shape, -1, np.int64)
+    anc_s[ri, rj] = s0[e[near]] + t[near] * ln[e[near]]
+    anc_l[ri, rj] = lid[e[near]]
+    rim = valid & ~inside
+    # links crossed once: the crossing against the rim end's anchor
+    single = np.ones(len(key), bool)
+    single[1:] &= ~same
+    single[:-1] &= ~same
+    (i0, j0), (i1, j1) = ends(key[single])
+    for (a, b) in ((i0, j0), (i1, j1)):
+        r = rim[a, b]
+        hit = r & _arc_apart(anc_l[a, b], np.nan_to_num(anc_s[a, b]), lk[single], arc[single], tot, gap)
+        out_rim[a[hit], b[hit]] = True
+    # rim-rim links not crossed: their anchors far apart
+    crossed = np.zeros(2 * ny * nx, bool)
+    crossed[key] = True
+    for ax in (0, 1):
+        if ax == 0:
+            a_, b_ = (slice(None), slice(None, -1)), (slice(None), slice(1, None))
+            cr = crossed[:ny * nx].reshape(ny, nx)[:, :-1]
+        else:
+            a_, b_ = (slice(None, -1), slice(None)), (slice(1, None), slice(None))
+            cr = crossed[ny * nx:].reshape(ny, nx)[:-1, :]
+        both = rim[a_] & rim[b_] & ~cr
         ii, jj = np.nonzero(both)
         if not len(ii):
             continue
-        ta, tb = fa[ii, jj], fb[ii, jj]
-        use = fine[ta] & fine[tb]
-        share = (F[ta][:, :, None] == F[tb][:, None, :]).any((1, 2))
-        gap = use & ~share
-        for sl in (a, b):
-            sub = out[sl]
-            sub[ii[gap], jj[gap]] = True
-    return out
+        la, sa = anc_l[a_][ii, jj], anc_s[a_][ii, jj]
+        lb, sb = anc_l[b_][ii, jj], anc_s[b_][ii, jj]
+        hit = _arc_apart(la, sa, lb, sb, tot, gap)
+        for sl in (a_, b_):
+            sub = out_rim[sl]
+            sub[ii[hit], jj[hit]] = True
+    return out_in, out_rim
 
 
 def sample_corners(G, F, P, fine):
@@ -923,9 +1081,10 @@ class Chart:
                 self.ginv = None
         E = mean_edges(self.V, F)
         fine = (G.h / mu_f) < 0.5 * E
-        self.gap = bridging_inside(G, F, fine)
+        gap_in, gap_rim = boundary_bridges(G, uv, F, valid, fine)
+        self.gap = gap_in
         self.corner_ok = sample_corners(G, F, G.coords(uv), fine)
-        self.march_on = valid & ~bridging_rim(G, F, valid) & ~self.gap
+        self.march_on = valid & ~bridging_rim(G, F, valid) & ~self.gap & ~gap_rim
         self.metric_passes = METRIC_PASSES if self.ginv is not None else 0
         self.seed_metric = None
         if self.ginv is not None:
@@ -1382,14 +1541,17 @@ class GeodesicSolver:
     def _fine_seed(self, ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius, calibrate):
         """Refined seeds (docs/geodesic.md, "Refined seed"). Where the chart's cell at a source is coarse
         in surface units (``h / mu`` above ``1 / FINE_NODES`` of the mean edge of the source's triangles,
-        ``mu`` the smallest of theirs), the grid cannot resolve the map's per-triangle metric near the
-        source, and its isotropic or directional speeds leave a deficit that travels outward. There the
-        seed takes shortest paths on the mesh through ``STEINER`` points per edge
-        (``steiner_distances``) over the triangles within ``FINE_WINDOW`` cells (UV) of the source (the
-        connected part holding it, at most ``FINE_MAX_FACES``). They are exact to the Steiner paths'
-        small excess up to ``tau``, the 3D distance from the source to the window's cut boundary: no
-        geodesic shorter than that leaves the window. A grid node takes the shortest path to a point of
-        its triangle's boundary plus the straight segment to it in the triangle.
+        ``mu`` the smallest of theirs), or a triangle at the source has a metric anisotropy
+        ``sqrt(l_max / l_min)`` above ``FINE_ANISO``, the grid's isotropic or directional speeds leave a
+        deficit near the source that travels outward. There the seed takes shortest paths on the mesh
+        through ``STEINER`` points per edge, Richardson-extrapolated (``steiner_distances``), over the
+        triangles within ``FINE_WINDOW`` cells (UV) or ``FINE_EDGES`` mean 3D edges (not on a
+        similarity chart) of the source (the connected part holding it, at most ``FINE_MAX_FACES``, the
+        nearest in 3D). They hold up to ``tau``, the 3D distance from the source to the window's cut
+        boundary: no geodesic shorter than that leaves the window. A grid node within ``FINE_BAND`` of
+        its cells inside ``tau`` takes the shortest path to a point of its triangle's boundary plus the
+        straight segment to it in the triangle; deeper nodes the path through a corner; nodes more than
+        4 cells beyond ``tau`` inf.
 
         ``S_uv`` (q,2) the sources' UV positions (vertex sources ``loc`` (a,) first, then points in the
         local faces ``src_faces`` (b,)). Returns a list (q,) of None (not refined) or ``(Tn, tv, tau,
@@ -1403,7 +1565,15 @@ class GeodesicSolver:
             E = np.sort(np.concatenate([Fc[:, [0, 1]], Fc[:, [1, 2]], Fc[:, [2, 0]]]), 1)
             key = E[:, 0] * len(ch.V) + E[:, 1]
             u, cnt = np.unique(key, return_counts=True)
-            cache = ch.fine_cache = {'bkeys': u[cnt == 1], 'edge': mean_edges(ch.V, Fc)}
+            aniso = np.ones(len(Fc))
+            if ch.ginv is not None:
+                a, b, c = ch.ginv.T
+                half, dev = (a + c) / 2, np.sqrt(((a - c) / 2) ** 2 + b * b)
+                aniso = np.sqrt((half + dev) / np.maximum(half - dev, 1e-300 * half))
+            W = ch.uv[Fc]
+            uv_edge = (np.linalg.norm(W - np.roll(W, 1, axis=1), axis=2)).mean(1)
+            cache = ch.fine_cache = {'bkeys': u[cnt == 1], 'edge': mean_edges(ch.V, Fc), 'aniso': aniso,
+                                     'uv_edge': uv_edge}
         nV = len(ch.V)
         for i in range(len(S_uv)):
             if i < len(loc):
@@ -1420,13 +1590,18 @@ class GeodesicSolver:
                 continue
             mu_min = float(ch.mu_face[star].min())
             per_edge = float(cache['edge'][star].mean()) * mu_min / h       # nodes per edge at the source
-            if per_edge >= FINE_NODES:
+            if per_edge >= FINE_NODES and not (cache['aniso'][star] > FINE_ANISO).any():
                 continue
+            # the window: triangles within FINE_WINDOW cells (UV) or FINE_EDGES mean edges (3D, the same
+            # at every grid) of the source
             wr = FINE_WINDOW * h
             dist_v = np.linalg.norm(ch.uv - S_uv[i], axis=1)
-            fsel = np.flatnonzero((dist_v[ch.F] <= wr).any(1))
-            if len(fsel) > FINE_MAX_FACES:              # the nearest triangles only
-                dmin = dist_v[ch.F[fsel]].min(1)
+            dist_3 = np.linalg.norm(ch.V - Xs, axis=1)
+            # (not on a similarity chart: its straight chart segments are exact, the Steiner paths not)
+            r3 = FINE_EDGES * float(cache['edge'][star].mean()) if ch.ginv is not None else -1.0
+            fsel = np.flatnonzero((dist_v[ch.F] <= wr).any(1) | (dist_3[ch.F] <= r3).any(1))
+            if len(fsel) > FINE_MAX_FACES:              # the nearest triangles (3D) only
+                dmin = dist_3[ch.F[fsel]].min(1)
                 fsel = np.sort(fsel[np.argsort(dmin, kind='stable')[:FINE_MAX_FACES]])
             fsel = np.union1d(fsel, star)
             # the connected part of the window that holds the source
@@ -1464,24 +1639,47 @@ class GeodesicSolver:
             # shortest paths on the window's surface through Steiner points on its edges (exact in
             # the limit; an upper bound, a path on the surface, at any STEINER)
             dv, dS, pts3, own = steiner_distances(ch.V, Fw, loc[i] if i < len(loc) else None, Xs,
-                                                  star if i >= len(loc) else None, STEINER)
+                                                  star if i >= len(loc) else None, STEINER, extrapolate=True)
             tau = min(tau, float(np.max(dv[sv][np.isfinite(dv[sv])])))
             # the chart's grid nodes in the window: the shortest path to a point on their triangle's
             # boundary, then the straight segment inside the triangle
-            c = G.coords(S_uv[i:i + 1])[0]
-            r = wr / h + 2
-            i0, i1 = max(int(c[1] - r), 0), min(int(c[1] + r) + 1, G.shape[0])
-            j0, j1 = max(int(c[0] - r), 0), min(int(c[0] + r) + 1, G.shape[1])
-            ii, jj = np.mgrid[i0:i1, j0:j1]
-            ii, jj = ii.ravel(), jj.ravel()
+            # the window's grid nodes (valid nodes of its triangles, rim nodes included), from the
+            # chart's nodes sorted by triangle (computed once per chart)
+            if 'node_order' not in cache:
+                fl = G.face.ravel()
+                order = np.argsort(fl, kind='stable')
+                cache['node_order'] = order
+                cache['face_start'] = np.searchsorted(fl[order], np.arange(len(ch.F) + 1))
+            st = cache['face_start']
+            cnt = st[fsel + 1] - st[fsel]
+            at = np.repeat(st[fsel] - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
+            flat = cache['node_order'][at]
+            ii, jj = flat // G.shape[1], flat % G.shape[1]
             fnode = G.face[ii, jj]
             row = np.full(len(ch.F), -1, np.int64)
             row[fsel] = np.arange(len(fsel))
-            ok = (fnode >= 0) & (row[np.maximum(fnode, 0)] >= 0) & ch.valid[ii, jj]
+            ok = ch.valid[ii, jj]
             ii, jj, fnode = ii[ok], jj[ok], fnode[ok]
             X, _ = ch.node_points(ii, jj)
-            cand = own[row[fnode]]                                            # (q, 3 + 3 STEINER)
-            val = (dS[cand] + np.linalg.norm(pts3[cand] - X[:, None], axis=2)).min(1)
+            # only nodes that can lie within tau (their 3D distance bounds the geodesic one from below),
+            # with a margin of cells for the level set's outer side; in chunks (q nodes x 3 + 3 STEINER)
+            near = np.linalg.norm(X - Xs, axis=1) <= tau + 4.0 * h / mu_min
+            ii, jj, fnode, X = ii[near], jj[near], fnode[near], X[near]
+            # the path through a corner of the node's triangle first (an upper bound): nodes it puts
+            # more than a band of cells inside tau are deep in the seed, where only the front's start
+            # matters, and keep it; the others take every point of their triangle's boundary
+            corner = own[row[fnode], :3]
+            to_corner = np.linalg.norm(pts3[corner] - X[:, None], axis=2)
+            val = (dS[corner] + to_corner).min(1)
+            # a node whose distance is more than 4 of its cells beyond tau (the corner's distance less the
+            # straight segment to it bounds it from below) only gets the far level-set value: inf
+            cell = h / ch.mu_face[fnode]
+            val = np.where((dS[corner] - to_corner).max(1) > tau + 4.0 * cell, np.inf, val)
+            band = np.flatnonzero(np.isfinite(val) & (val > tau - FINE_BAND * cell))
+            for c0 in range(0, len(band), 20_000):
+                sl = band[c0:c0 + 20_000]
+                cand = own[row[fnode[sl]]]
+                val[sl] = (dS[cand] + np.linalg.norm(pts3[cand] - X[sl, None], axis=2)).min(1)
             Tn = np.full(G.shape, np.inf)
             Tn[ii, jj] = val
             tv = np.full(nV, np.inf)
