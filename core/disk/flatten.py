@@ -173,9 +173,11 @@ class DiskSystem:
 
     def harmonic(self, fB):
         """Harmonic extension (n,) or (n,r) of boundary values ``fB`` (nb,) or (nb,r)."""
-        f = np.zeros((self.n,) + np.shape(fB)[1:])
+        f = np.empty((self.n,) + np.shape(fB)[1:])
         f[self.B] = fB
-        f[self.I] = -self.solve_II(self.L_IB @ fB)
+        x = self.solve_II(self.L_IB @ fB)
+        np.negative(x, out=x)
+        f[self.I] = x
         return f
 
     # --- steps 3-4: the boundary curve ---------------------------------------------------------

@@ -18,11 +18,36 @@ represented by its highest and lowest triangle, plus a small smoothness term), b
 Laplacian) and keeps the step, or a half or quarter of it, only if the realised ratio improves with
 no flipped triangle and conformality inside the budget.
 """
+import threading
+
 import numpy as np
 import scipy.sparse as sp
 
 from ..errors import ConformalError
 from ..mesh.measures import singular_values
+
+
+class _Background:
+    """``fn(*args)`` on its own thread; ``result()`` waits and returns its value or raises its error."""
+
+    def __init__(self, fn, *args):
+        self._out = None
+        self._thread = threading.Thread(target=self._run, args=(fn, args), daemon=True)
+        self._thread.start()
+
+    def _run(self, fn, args):
+        try:
+            self._out = (fn(*args), None)
+        except BaseException as exc:           # handed to the caller of result()
+            self._out = (None, exc)
+
+    def result(self):
+        self._thread.join()
+        value, exc = self._out
+        if exc is not None:
+            raise exc
+        return value
+
 
 def _highs_core():
     """HiGHS's own binding (``highspy._core``: a model kept between rounds, re-solved from its last
@@ -268,7 +293,10 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
         s = _face_log_scale(system, uv, keep)
         return s
 
-    # on big meshes the Neumann factor may still be on its way: the boundary response needs only L_II
+    # the boundary response H (n, K) of u to the coefficients needs only L_II. With the Neumann factor
+    # still on its way (SuperLU on big meshes) it is solved first, overlapping that factorisation;
+    # otherwise on its own thread while the area map is measured here (its solves leave the GIL free
+    # between column blocks, and numpy releases it in its loops)
     H = system.harmonic(Phi) if system.conjugate_pending else None
     u0 = system.yamabe(np.zeros(nb))
     uv0 = system.map_from_u(u0)
@@ -276,21 +304,24 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     if s0 is None:
         raise ConformalError("the area-preserving map already folds: the mesh has triangles too "
                              "degenerate to flatten; clean it up (merge by distance, dissolve degenerate)")
+    spread0 = float(s0.max() - s0.min())
+    flat = spread0 <= -np.log1p(-min_gain)
+    progress(0.15, 'boundary response')
+    job = _Background(system.harmonic, Phi) if H is None and not flat else None
     qc0 = _qc_mean(system, uv0, keep)
     if qc_slack is None:
         qc_slack = max(0.5 * (qc0 - 1.0), 0.002)
     qc_budget = qc0 + qc_slack
-    spread0 = float(s0.max() - s0.min())
-    if spread0 <= -np.log1p(-min_gain):
+    if flat:
         return u0, uv0, {'ratio_area_mode': float(np.exp(-spread0)), 'iterations': 0, 'maps_built': 0,
                          'basis_size': int(Phi.shape[1]), 'qc_budget': round(qc_budget, 5),
                          'area_certified': f"the area map's ratio is within {min_gain:g} of 1"}
-    progress(0.15, 'boundary response')
-    if H is None:
-        H = system.harmonic(Phi)                      # (n, K): response of u to the coefficients
     Fk = system.F[keep]
     rows = np.repeat(np.arange(len(Fk)), 3)
     avg = sp.csr_matrix((np.full(3 * len(Fk), 1.0 / 3.0), (rows, Fk.ravel())), shape=(len(Fk), system.n))
+    reps0 = _representatives(system, uv0, s0, keep, bins)      # the first round's, while H is solved
+    if job is not None:
+        H = job.result()
     # the linear model of s_T (face means of H) is needed only on each round's representatives:
     # avg[reps] @ H, never the whole (m, K) matrix (256 MB at 1M triangles)
     best = dict(c=np.zeros(Phi.shape[1]), u=u0, uv=uv0, s=s0, spread=float(s0.max() - s0.min()),
@@ -302,7 +333,7 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
         progress(0.2 + 0.7 * it / max_iter, f'optimising boundary scale ({it})')
         if maps >= max_maps:
             break
-        reps = _representatives(system, best['uv'], best['s'], keep, bins)
+        reps = reps0 if it == 1 else _representatives(system, best['uv'], best['s'], keep, bins)
         a, predicted = _model_lp(best['s'][reps], avg[reps] @ H, best['c'], delta, reg_w, active)
         if a is None or best['spread'] - predicted < 1e-3 * best['spread']:
             break                         # no gain in this box, nor in any smaller one

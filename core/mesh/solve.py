@@ -72,6 +72,7 @@ BACKENDS = ('cholmod', 'superlu')
 SPLIT_RHS = 8           # SuperLU: split at least this many right-hand sides over WORKERS threads
 BLOCK_BYTES = 16 << 20  # SuperLU: right-hand sides are solved in column blocks of at most this size
 CHOLMOD_MIN = 1_000     # rows from which CHOLMOD is used (below, its fixed cost of ~0.5 ms dominates)
+CHOLMOD_BLOCK = 4       # CHOLMOD solves this many right-hand sides per call (the GIL is free between)
 PARALLEL_MAX = 400_000  # total rows up to which factor_all runs SuperLU factorisations at once (memory)
 PARALLEL_MIN = 4_000    # total rows from which that pays (below, the threads cost more than they save)
 ND_MIN = 60_000         # rows from which fill_order computes a nested dissection order
@@ -305,11 +306,20 @@ class Factor:
                                  "triangles or a disconnected piece", 'degenerate') from None
 
     def _solve_cholmod(self, b):
-        """CHOLMOD's solve of (k,) or (k,r) ``b`` (cvxopt's dense matrices are column-major)."""
-        shape = b.shape
-        B = _cvx_matrix(np.ravel(b, order='F'), (shape[0], 1 if b.ndim == 1 else shape[1]))
-        _cholmod.solve(self._chol, B)
-        return np.array(B).reshape(shape)          # (k,r) from the column-major buffer, C-ordered copy
+        """CHOLMOD's solve of (k,) or (k,r) ``b``; (k,r) comes back Fortran-ordered. cvxopt's dense
+        matrices are column-major and its solve holds the GIL for the whole call: columns go in blocks
+        of ``CHOLMOD_BLOCK``, so other threads (numpy work beside a long multi-column solve, Blender's
+        interface) get the GIL between blocks."""
+        if b.ndim == 1:
+            B = _cvx_matrix(np.ascontiguousarray(b))
+            _cholmod.solve(self._chol, B)
+            return np.asarray(B)[:, 0]
+        x = np.empty(b.shape, order='F')
+        for c0 in range(0, b.shape[1], CHOLMOD_BLOCK):
+            B = _cvx_matrix(np.asfortranarray(b[:, c0:c0 + CHOLMOD_BLOCK]))
+            _cholmod.solve(self._chol, B)
+            x[:, c0:c0 + CHOLMOD_BLOCK] = np.asarray(B)
+        return x
 
     def solve(self, b):
         """``K^-1 b`` for ``b`` (k,) or (k,r); float64 of the same shape."""
