@@ -265,26 +265,34 @@ def test_clamped_laplacian_is_local_and_keeps_the_maximum_principle():
     assert abs(L2 - L2.T).max() < 1e-15
 
 
-def test_exact_flat_cone_metric_and_its_unfolding():
-    """Newton on the discrete conformal equation reaches the target angle sums (the cone angles,
-    2*pi elsewhere), and the unfolded cut disk has exactly the metric's edge lengths."""
-    from core.atlas.cones import _disk_laplacian, flat_cone_metric, unfold
-    from core.mesh.intrinsic import corner_angles
-    V, F = blob(8)
+def _cone_metric_problem(size, cones):
+    """A blob(size) sphere with cones at the vertices ``cones`` (their L2 angles), cut into a disk:
+    (V, F, ConeSystem, S, kappa, seams, cut, intrinsic triangulation T of the cut disk, target angle
+    sums (n,), fixed (n,) bool with vertex 0 fixed) for ``flat_cone_metric``."""
+    from core.atlas.cones import _disk_laplacian
+    V, F = blob(size)
     sy = ConeSystem(V, F)
-    S = np.array([5, 90, 160, 300, 420])
+    S = np.array(cones)
     kap = sy.l2_angles(S)
-    assert abs(kap.sum() - 4 * np.pi) < 1e-9
     seams = cut_graph(V, F, S)
     cut = cut_along_seams(F, len(V), seams)
     cache = {}
     _disk_laplacian(V[cut.vert_of], cut.F, cache)
-    T = cache['disk_T']
-    n = len(V)
-    target = np.full(n, 2 * np.pi)
+    target = np.full(len(V), 2 * np.pi)
     target[S] -= kap
-    fixed = np.zeros(n, bool)
+    fixed = np.zeros(len(V), bool)
     fixed[0] = True
+    return V, F, sy, S, kap, seams, cut, cache['disk_T'], target, fixed
+
+
+def test_exact_flat_cone_metric_and_its_unfolding():
+    """Newton on the discrete conformal equation reaches the target angle sums (the cone angles,
+    2*pi elsewhere), and the unfolded cut disk has exactly the metric's edge lengths."""
+    from core.atlas.cones import flat_cone_metric, unfold
+    from core.mesh.intrinsic import corner_angles
+    V, F, sy, S, kap, seams, cut, T, target, fixed = _cone_metric_problem(8, [5, 90, 160, 300, 420])
+    n = len(V)
+    assert abs(kap.sum() - 4 * np.pi) < 1e-9
     u, el, flat = flat_cone_metric(T, cut.vert_of, n, target, fixed, np.zeros(n))
     assert flat == 0
     sums = np.bincount(cut.vert_of[T.F].ravel(), corner_angles(el[T.FE]).ravel(), minlength=n)
@@ -421,22 +429,10 @@ def test_krylov_newton_reaches_the_same_flat_metric():
     factor, ``krylov=True``) converges to the chord method's flat cone metric (the same unique
     solution up to round-off), from the linear log scale and from zero (no preconditioner: it factors
     the Hessian itself)."""
-    from core.atlas.cones import _disk_laplacian, flat_cone_metric
+    from core.atlas.cones import flat_cone_metric
     from core.mesh.intrinsic import corner_angles
-    V, F = blob(10)
-    sy = ConeSystem(V, F)
-    S = np.array([5, 90, 160, 300, 420, 610])
-    kap = sy.l2_angles(S)
-    seams = cut_graph(V, F, S)
-    cut = cut_along_seams(F, len(V), seams)
-    cache = {}
-    _disk_laplacian(V[cut.vert_of], cut.F, cache)
-    T = cache['disk_T']
+    V, F, sy, S, kap, seams, cut, T, target, fixed = _cone_metric_problem(10, [5, 90, 160, 300, 420, 610])
     n = len(V)
-    target = np.full(n, 2 * np.pi)
-    target[S] -= kap
-    fixed = np.zeros(n, bool)
-    fixed[0] = True
     u_lin = sy.u_of(S, kap)
     ref = flat_cone_metric(T, cut.vert_of, n, target, fixed, u_lin - u_lin[0], fac0=sy._fac)
     for u0, fac0 in ((u_lin - u_lin[0], sy._fac), (np.zeros(n), None)):

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ..background import Background
 from ..errors import ConformalError
 from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian
@@ -374,7 +375,7 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     u = None
     job = None
     if boundary == 'uniform' and (bound or (bound is None and len(F) <= AUTO_BOUND_FACES)):
-        job = _BoundJob(system, mask)          # the bound needs only the system: it runs beside optimise
+        job = Background(_bound, system, mask)     # it needs only the system: it runs beside optimise
     t = time.perf_counter()
     if boundary == 'free':
         uv = lscm(V, system.L, system.B)
@@ -399,8 +400,7 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     if bound:
         report_progress(0.9, 'certifying the bound')
         t = time.perf_counter()
-        job = job or _BoundJob(system, mask, thread=False)
-        value, error, timings['bound'] = job.result()
+        value, error, timings['bound'] = job.result() if job is not None else _bound(system, mask)
         timings['bound_wait'] = time.perf_counter() - t
         report['bound_vertex'] = value
         if error is not None:
@@ -429,39 +429,17 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     return FlattenResult(uv=uv, mu=mu, u=u, report=report)
 
 
-class _BoundJob:
-    """``vertex_bound(system, real_faces=mask)`` on its own thread (``thread=False``: at ``result``).
-    The bound depends only on the system, not on the optimiser's map, and most of its time is spent in
-    HiGHS and in sparse solves, which release the GIL: on two or more cores its time hides behind
-    ``optimise`` (docs/scale.md, latency). ``result()`` waits and returns (value or None, the
-    ConformalError or None, seconds the bound took); any other exception is raised there."""
-
-    def __init__(self, system, mask, thread=True):
-        self.system, self.mask = system, mask
-        self.out = None
-        self.thread = threading.Thread(target=self._run, daemon=True) if thread else None
-        if self.thread is not None:
-            self.thread.start()
-
-    def _run(self):
-        t = time.perf_counter()
-        try:
-            self.out = (vertex_bound(self.system, real_faces=self.mask), None, None)
-        except ConformalError as exc:
-            self.out = (None, exc, None)
-        except Exception as exc:               # re-raised by result() in the caller's thread
-            self.out = (None, None, exc)
-        self.seconds = time.perf_counter() - t
-
-    def result(self):
-        if self.thread is None:
-            self._run()
-        else:
-            self.thread.join()
-        value, error, unexpected = self.out
-        if unexpected is not None:
-            raise unexpected
-        return value, error, self.seconds
+def _bound(system, mask):
+    """``vertex_bound(system, real_faces=mask)`` as (value or None, the ConformalError or None, seconds
+    it took); any other exception propagates. The bound depends only on the system, not on the
+    optimiser's map, and most of its time is spent in HiGHS and in sparse solves: on two or more cores
+    it runs on its own thread beside ``optimise`` (``Background``; docs/scale.md, latency)."""
+    t = time.perf_counter()
+    try:
+        value, error = vertex_bound(system, real_faces=mask), None
+    except ConformalError as exc:
+        value, error = None, exc
+    return value, error, time.perf_counter() - t
 
 
 def _fallback(system, V, mask):

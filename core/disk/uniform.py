@@ -18,35 +18,12 @@ represented by its highest and lowest triangle, plus a small smoothness term), b
 Laplacian) and keeps the step, or a half or quarter of it, only if the realised ratio improves with
 no flipped triangle and conformality inside the budget.
 """
-import threading
-
 import numpy as np
 import scipy.sparse as sp
 
+from ..background import Background
 from ..errors import ConformalError
 from ..mesh.measures import singular_values
-
-
-class _Background:
-    """``fn(*args)`` on its own thread; ``result()`` waits and returns its value or raises its error."""
-
-    def __init__(self, fn, *args):
-        self._out = None
-        self._thread = threading.Thread(target=self._run, args=(fn, args), daemon=True)
-        self._thread.start()
-
-    def _run(self, fn, args):
-        try:
-            self._out = (fn(*args), None)
-        except BaseException as exc:           # handed to the caller of result()
-            self._out = (None, exc)
-
-    def result(self):
-        self._thread.join()
-        value, exc = self._out
-        if exc is not None:
-            raise exc
-        return value
 
 
 def _highs_core():
@@ -307,7 +284,7 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     spread0 = float(s0.max() - s0.min())
     flat = spread0 <= -np.log1p(-min_gain)
     progress(0.15, 'boundary response')
-    job = _Background(system.harmonic, Phi) if H is None and not flat else None
+    job = Background(system.harmonic, Phi) if H is None and not flat else None
     qc0 = _qc_mean(system, uv0, keep)
     if qc_slack is None:
         qc_slack = max(0.5 * (qc0 - 1.0), 0.002)

@@ -23,13 +23,13 @@ triangles. ``sub_order`` restricts one order of all vertices to a submatrix (int
 but one vertex), so one ordering serves every matrix of a mesh.
 """
 import os
-import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..background import Background
 from ..errors import ConformalError
 
 try:                                     # the optional compiled Cholesky (a pinned requirement)
@@ -118,28 +118,12 @@ def factor_all(*matrices, orders=None, defer_last=False):
         return list(ex.map(lambda ko: Factor(ko[0], order=ko[1]), zip(matrices, orders)))
 
 
-class FactorJob:
+class FactorJob(Background):
     """``Factor(K, order=order)`` computed on its own thread (SuperLU releases the GIL, so the caller
-    goes on meanwhile). ``result()`` waits and returns the ``Factor``, or raises its error; it may be
-    called from several threads."""
+    goes on meanwhile). ``result()`` waits and returns the ``Factor``, or raises its error."""
 
     def __init__(self, K, order=None):
-        self._out = None
-        self._thread = threading.Thread(target=self._run, args=(K, order), daemon=True)
-        self._thread.start()
-
-    def _run(self, K, order):
-        try:
-            self._out = (Factor(K, order=order), None)
-        except BaseException as exc:           # handed to the caller of result()
-            self._out = (None, exc)
-
-    def result(self):
-        self._thread.join()
-        factor, exc = self._out
-        if exc is not None:
-            raise exc
-        return factor
+        super().__init__(Factor, K, order=order)
 
 
 def fill_order(points, K, min_size=None, leaf=ND_LEAF):
