@@ -15,7 +15,6 @@ lengths, and extend it conformally (x harmonic, y its conjugate harmonic). Bound
 - ``uniform``: the paper's objective, the most uniform conformal factor ``mu = exp(u)``. See
   ``core.uniform``.
 """
-import threading
 import time
 from dataclasses import dataclass, field
 
@@ -28,7 +27,7 @@ from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians, signed_uv_areas
 from ..mesh.intrinsic import intrinsic_delaunay
-from ..mesh.solve import Factor, FactorJob, backend, factor_all, fill_order, sub_order
+from ..mesh.solve import Factor, FactorJob, factor_all, fill_order, sub_order
 from .lscm import lscm
 from .uniform import optimise, vertex_bound
 from ..mesh.validate import check_mesh, degenerate_faces, normalise_scale, DEFAULT_MAX_FACES
@@ -37,7 +36,6 @@ BOUNDARY_MODES = ('free', 'area', 'uniform')
 FIT_MODES = ('true_scale', 'unit_square')
 OPERATOR_MODES = ('auto', 'intrinsic', 'extrinsic')
 AUTO_BOUND_FACES = 20_000      # above this the certified bound is computed only on request
-MANY_RHS = 8                   # solve_II: from this many right-hand sides on, a CHOLMOD factor of L_II
 QC_WARN = 1.5                  # a map with qc_mean above this gets a warning
 MU_WARN = 1e-4                 # ... and one with mu_ratio below this (texel density varies 10^4-fold)
 
@@ -120,8 +118,6 @@ class DiskSystem:
         del LI                                 # a Laplacian-sized copy: not alive while factoring
         keep = np.arange(n) != self.B[0]
         self._keep = keep
-        self._II_many = None
-        self._II_lock = threading.Lock()       # the bound's thread and optimise both solve many columns
         if neumann and len(self.I):
             # L_II for the Yamabe and harmonic solves, L without one vertex for the conjugate; on big
             # meshes both in one nested dissection order of the vertices (docs/scale.md)
@@ -148,20 +144,9 @@ class DiskSystem:
 
     # --- step 2: interior log scale factors -----------------------------------------------------
     def solve_II(self, b):
-        """``L_II^-1 b`` for (nI,) or (nI,r) ``b``. From ``MANY_RHS`` columns on, when ``L_II`` is
-        factored by SuperLU and CHOLMOD is available, a CHOLMOD factor of ``L_II`` (made once, on first
-        use) solves instead: scipy's SuperLU solves many columns 5-15x slower than CHOLMOD (at 16k
-        interior vertices, 64 columns: 0.9-1.5 s against 0.1 s), which is what ``uniform``'s response
-        solves need (docs/scale.md, latency). Not on big meshes factored in a nested dissection order
-        (``Factor.ordering == 'given'``): there a second factorisation would cost more than it saves."""
+        """``L_II^-1 b`` for (nI,) or (nI,r) ``b`` (zeros without interior vertices)."""
         if self._II is None:
             return np.zeros_like(b)
-        if np.ndim(b) == 2 and b.shape[1] >= MANY_RHS and self._II.backend == 'superlu' and \
-                self._II.ordering != 'given' and backend() == 'cholmod':
-            with self._II_lock:
-                if self._II_many is None:
-                    self._II_many = Factor(self.L_II, 'cholmod')
-            return self._II_many.solve(b)
         return self._II.solve(b)
 
     def yamabe(self, uB):
