@@ -230,17 +230,37 @@ def _model_lp(s, JF, c, delta, reg_w, active=200, max_rounds=6, max_add=1000, se
     return best
 
 
+def _face_means(H, T):
+    """Mean (t, K) of the rows of H (n, K) at the corners of the triangles T (t, 3): a third of each, in
+    increasing vertex order (the sums of the sparse averaging matrix this replaces, to the bit)."""
+    T = np.sort(T, axis=1)
+    third = 1.0 / 3.0
+    return third * H[T[:, 0]] + third * H[T[:, 1]] + third * H[T[:, 2]]
+
+
 def _representatives(system, uv, s, keep, bins):
     """Indices into ``s`` (the counted triangles) of the highest and the lowest triangle in each cell
     of a ``bins`` x ``bins`` grid over the UV map ``uv`` (n,2)."""
-    C = uv[system.F[keep]].mean(axis=1)
+    Fk = system.F[keep]
+    C = (uv[Fk[:, 0]] + uv[Fk[:, 1]] + uv[Fk[:, 2]]) / 3.0
     lo, hi = C.min(0), C.max(0)
     ij = np.minimum(((C - lo) / np.maximum(hi - lo, 1e-300) * bins).astype(np.int64), bins - 1)
     cell = ij[:, 0] * bins + ij[:, 1]
-    order = np.lexsort((s, cell))               # by cell, then by s
-    first = np.r_[True, cell[order][1:] != cell[order][:-1]]
-    last = np.r_[cell[order][1:] != cell[order][:-1], True]
-    return np.unique(np.r_[order[first], order[last]])
+    # per-cell extremes by scatter (no sort of all m triangles: 0.7 s at 400k): of equal values the
+    # lowest index for the minimum and the highest for the maximum
+    nc, m = bins * bins, len(s)
+    index = np.arange(m)
+    low = np.full(nc, np.inf)
+    np.minimum.at(low, cell, s)
+    at = s == low[cell]
+    first = np.full(nc, m)
+    np.minimum.at(first, cell[at], index[at])
+    high = np.full(nc, -np.inf)
+    np.maximum.at(high, cell, s)
+    at = s == high[cell]
+    last = np.full(nc, -1)
+    np.maximum.at(last, cell[at], index[at])
+    return np.unique(np.r_[first[first < m], last[last >= 0]])
 
 
 def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active=200, reg=1e-3,
@@ -258,7 +278,8 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     measured on every triangle. min_gain: if the ``area`` map's realised ratio is already at least ``1 -
     min_gain`` (a flat or nearly flat mesh), no ratio can beat it by more than ``min_gain`` (the ratio is
     at most 1): the ``area`` map is returned at once, with ``area_certified`` in the dict (docs/scale.md).
-    Returns ``u`` (n,), ``uv`` (n,2) and a dict for the report."""
+    Returns ``u`` (n,), ``uv`` (n,2) and a dict for the report (``qc_budget`` in it once a step was
+    checked against the budget)."""
     progress = progress or (lambda f, msg: None)
     nb = len(system.B)
     if n_freq is None:
@@ -285,24 +306,26 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     flat = spread0 <= -np.log1p(-min_gain)
     progress(0.15, 'boundary response')
     job = Background(system.harmonic, Phi) if H is None and not flat else None
-    qc0 = _qc_mean(system, uv0, keep)
-    if qc_slack is None:
-        qc_slack = max(0.5 * (qc0 - 1.0), 0.002)
-    qc_budget = qc0 + qc_slack
+    budget = []
+
+    def qc_budget():
+        """The conformality budget, measured on the area map the first time a step needs it (a
+        round that predicts no gain never pays for it: 0.6 s at 1M triangles, beside the response)."""
+        if not budget:
+            qc0 = _qc_mean(system, uv0, keep)
+            budget.append(qc0 + (max(0.5 * (qc0 - 1.0), 0.002) if qc_slack is None else qc_slack))
+        return budget[0]
     if flat:
         return u0, uv0, {'ratio_area_mode': float(np.exp(-spread0)), 'iterations': 0, 'maps_built': 0,
-                         'basis_size': int(Phi.shape[1]), 'qc_budget': round(qc_budget, 5),
+                         'basis_size': int(Phi.shape[1]), 'qc_budget': round(qc_budget(), 5),
                          'area_certified': f"the area map's ratio is within {min_gain:g} of 1"}
     Fk = system.F[keep]
-    rows = np.repeat(np.arange(len(Fk)), 3)
-    avg = sp.csr_matrix((np.full(3 * len(Fk), 1.0 / 3.0), (rows, Fk.ravel())), shape=(len(Fk), system.n))
     reps0 = _representatives(system, uv0, s0, keep, bins)      # the first round's, while H is solved
     if job is not None:
         H = job.result()
-    # the linear model of s_T (face means of H) is needed only on each round's representatives:
-    # avg[reps] @ H, never the whole (m, K) matrix (256 MB at 1M triangles)
-    best = dict(c=np.zeros(Phi.shape[1]), u=u0, uv=uv0, s=s0, spread=float(s0.max() - s0.min()),
-                qc=qc0)
+    # the linear model of s_T (face means of H) is needed only on each round's representatives,
+    # never the whole (m, K) matrix (256 MB at 1M triangles)
+    best = dict(c=np.zeros(Phi.shape[1]), u=u0, uv=uv0, s=s0, spread=float(s0.max() - s0.min()))
     delta = best['spread']
     reg_w = reg * best['spread'] * freq if reg else None
     it, maps = 0, 0
@@ -311,7 +334,7 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
         if maps >= max_maps:
             break
         reps = reps0 if it == 1 else _representatives(system, best['uv'], best['s'], keep, bins)
-        a, predicted = _model_lp(best['s'][reps], avg[reps] @ H, best['c'], delta, reg_w, active)
+        a, predicted = _model_lp(best['s'][reps], _face_means(H, Fk[reps]), best['c'], delta, reg_w, active)
         if a is None or best['spread'] - predicted < 1e-3 * best['spread']:
             break                         # no gain in this box, nor in any smaller one
         accepted = False
@@ -330,9 +353,9 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
             if spread >= best['spread'] * (1 - 1e-4):
                 continue
             qc = _qc_mean(system, uv, keep)
-            if qc > qc_budget:
+            if qc > qc_budget():
                 continue
-            best = dict(c=cand, u=u, uv=uv, s=s_new, spread=spread, qc=qc)
+            best = dict(c=cand, u=u, uv=uv, s=s_new, spread=spread)
             accepted = True
             break
         if not accepted:
@@ -344,8 +367,9 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
         'iterations': it,
         'maps_built': maps,
         'basis_size': int(Phi.shape[1]),
-        'qc_budget': round(qc_budget, 5),
     }
+    if budget:                            # measured only if a step needed it
+        opt['qc_budget'] = round(budget[0], 5)
     return best['u'], best['uv'], opt
 
 
