@@ -80,7 +80,7 @@ SPARSE_LAMBDA = 0.1                # the L2 start's penalty weight (times 1/n; s
 SPARSE_ITERS = 15                  # reweighting rounds of the L2 start
 ALT_MARGIN = 0.02                  # another placement is laid out when its estimate beats the realised
                                    # ratio of the best clean layout by this much
-SPREAD_PARTIAL_MIN = 2 * BIG_MESH  # face_spread over more triangles: the tails only (``_weighted_tails``)
+SPREAD_PARTIAL_MIN = 4096        # face_spread over more triangles: the tails only (``_weighted_tails``, the same numbers)
 SPARSE_POOL = 3                    # the L2 start places SPARSE_POOL times the cones, then thins them
 
 
@@ -144,6 +144,7 @@ class ConeSystem:
         self.total = 2 * np.pi * self.chi if self.needs_sum else None
         self._cols = {}                # vertex -> its column in self._G (the Green's columns solved so far)
         self._G = np.empty((n, 0))
+        self._last = (None, None)      # the last ``columns`` request and its answer (half repeat it)
         self.u0 = self.solve(-self.Omega)
         # per-vertex area (a third of the incident triangles), for area-weighted statistics
         self.vertex_area = np.bincount(F.ravel(), np.repeat(self.A / 3, 3), minlength=n)
@@ -170,8 +171,11 @@ class ConeSystem:
         its column there); when ``S`` are the first columns in the order they were added (the
         greedy placement's case) a view of them is returned, else a gathered copy (C order: the
         products with it round exactly as with the columns stacked, so the results do not change).
-        Callers must not write into the result."""
+        Callers must not write into the result. A request for the same cones as the last one gets
+        the same array back (the placement asks for ``u_of`` and the angles of one set in turn)."""
         S = [int(s) for s in S]
+        if tuple(S) == self._last[0]:
+            return self._last[1]
         new = list(dict.fromkeys(s for s in S if s not in self._cols))
         if new:
             B = np.zeros((self.n, len(new)))
@@ -189,8 +193,11 @@ class ConeSystem:
             return np.zeros((self.n, 0))
         idx = [self._cols[s] for s in S]
         if idx == list(range(len(idx))):
-            return self._G[:, :len(idx)]
-        return np.take(self._G, idx, axis=1)                  # C order, like the view
+            G = self._G[:, :len(idx)]
+        else:
+            G = np.take(self._G, idx, axis=1)                 # C order, like the view
+        self._last = (tuple(S), G)
+        return G
 
     def u_of(self, S, kappa):
         """Log scale u (n,) with curvature ``kappa`` (k,) at cones ``S`` (k,)."""
@@ -450,14 +457,35 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
 
 def _batch_spread(F, A, U, q=1.0):
     """Area-weighted q%/(100-q)% spread of the per-triangle scale for each column of ``U`` (n,c):
-    ``face_spread`` of every column at once. Returns (c,)."""
-    uf = U[F].mean(1)                                           # (m,c)
+    ``face_spread`` of every column at once. Returns (c,).
+
+    Only the two tails are sorted (``_weighted_tails`` for a stack of columns): ``np.argpartition``
+    picks the ``k`` lowest and ``k`` highest triangles of every column, ``k`` doubled until each tail
+    holds more than q% of the area; the full sort of all m triangles of all c columns took a quarter
+    of a one-click unwrap on small meshes (cheburashka: 11 of 40 s)."""
+    uf = (U[F[:, 0]] + U[F[:, 1]] + U[F[:, 2]]) / 3.0           # (m,c): U[F].mean(1), to the bit
+    m, ncol = uf.shape
+    cols = np.arange(ncol)
+    q = q / 100
+    total = float(A.sum())
+    k = min(m, int(4 * q * m) + 64)
+    while 2 * k <= m:
+        part = np.argpartition(uf, (k - 1, m - k), axis=0)
+        lo_i, hi_i = part[:k], part[m - k:]
+        if (A[lo_i].sum(0) > q * total * (1 + 1e-9)).all() and (A[hi_i].sum(0) > q * total * (1 + 1e-9)).all():
+            o = np.take_along_axis(lo_i, np.argsort(np.take_along_axis(uf, lo_i, 0), axis=0), 0)
+            j = (np.cumsum(A[o], axis=0) < q * total).sum(0)     # the first reaching q of the area
+            lo = uf[o[j, cols], cols]
+            o = np.take_along_axis(hi_i, np.argsort(-np.take_along_axis(uf, hi_i, 0), axis=0), 0)
+            j = (np.cumsum(A[o], axis=0) <= q * total).sum(0)    # from the top: 1 - q reached
+            hi = uf[o[j, cols], cols]
+            return np.exp(lo - hi)
+        k *= 2
     order = np.argsort(uf, axis=0)
     c = np.cumsum(A[order], axis=0)
     c /= c[-1]
-    cols = np.arange(U.shape[1])
-    lo = uf[order[(c < q / 100).sum(0).clip(0, len(A) - 1), cols], cols]
-    hi = uf[order[(c < 1 - q / 100).sum(0).clip(0, len(A) - 1), cols], cols]
+    lo = uf[order[(c < q).sum(0).clip(0, len(A) - 1), cols], cols]
+    hi = uf[order[(c < 1 - q).sum(0).clip(0, len(A) - 1), cols], cols]
     return np.exp(lo - hi)
 
 
