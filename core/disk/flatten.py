@@ -348,6 +348,18 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
             raise ConformalError("every triangle has zero area", 'degenerate', 'clean_mesh')
         operators = 'intrinsic'
     timings['check'] = time.perf_counter() - t0
+    uv = planar_map(V, F) if mask is None else None
+    if uv is not None:
+        # a mesh lying in a plane is its own conformal map in every mode: an isometry (u = 0, mu = 1
+        # on every triangle), so the optimum of ``uniform`` and its certified bound are both 1
+        report = {'boundary': boundary, 'vertices': len(V), 'faces': len(F), 'boundary_vertices': int(len(loop)),
+                  'operators': {'mode': operators, 'intrinsic': False}, 'solver': None,
+                  'planar': 'the mesh lies in a plane: its own coordinates are the map (no solve)'}
+        if boundary == 'uniform' and (bound or (bound is None and len(F) <= AUTO_BOUND_FACES)):
+            report['bound_vertex'] = 1.0
+        frames, A = local_frames(V, F)
+        return _measured(report, uv, None if boundary == 'free' else np.zeros(len(V)), F, None, A,
+                         lambda uv: jacobians_from_frames(frames, F, uv), fit, unit, warnings, timings, t0)
     report_progress(0.05, 'factorising the Laplacian')
     t = time.perf_counter()
     system = DiskSystem(V, F, loop, neumann=boundary != 'free', operators=operators)
@@ -394,14 +406,23 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     elif job is not None:
         job.result()                           # not wanted after all (the optimiser fell back)
     report_progress(0.95, 'measuring')
+    if degenerate.any():
+        # a zero-area triangle has no Jacobian; it still must not turn over in UV (the sign does not
+        # change with the similarity ``normalise_uv`` applies)
+        report['degenerate_flips'] = int((signed_uv_areas(uv, F[degenerate]) < 0).sum())
+    return _measured(report, uv, u, F, mask, system.A, system.jacobians, fit, unit, warnings, timings, t0)
+
+
+def _measured(report, uv, u, F, mask, A, jacobians, fit, unit, warnings, timings, t0):
+    """The ``FlattenResult`` of a map ``uv`` (n,2) with log scale ``u`` (n,) or None: normalised
+    (``fit``, ``unit`` the mesh's scale), measured per triangle on ``mask`` (None: all) with the 3D
+    areas ``A`` (m,) and ``jacobians(uv)`` (m,2,2), and its report completed (measures, warnings,
+    seconds since ``t0``)."""
     Fm = F if mask is None else F[mask]
-    uv = normalise_uv(Fm, uv, (system.A if mask is None else system.A[mask]).sum(), fit)
-    J, A = system.jacobians(uv), system.A
+    uv = normalise_uv(Fm, uv, (A if mask is None else A[mask]).sum(), fit)
+    J = jacobians(uv)
     measured, mu_real = measures_from_jacobians(*((J, A) if mask is None else (J[mask], A[mask])))
     report.update(measured)
-    if degenerate.any():
-        # a zero-area triangle has no Jacobian; it still must not turn over in UV
-        report['degenerate_flips'] = int((signed_uv_areas(uv, F[degenerate]) < 0).sum())
     if u is not None:
         used = np.unique(Fm)
         report['vertex_ratio'] = float(np.exp(u[used].min() - u[used].max()))
@@ -413,6 +434,29 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     timings['total'] = time.perf_counter() - t0
     report['seconds'] = {k: round(v, 4) for k, v in timings.items()}
     return FlattenResult(uv=uv, mu=mu, u=u, report=report)
+
+
+PLANAR_TOL = 1e-9         # a mesh within this distance of a plane (units of its half span) is planar
+
+
+def planar_map(V, F, tol=PLANAR_TOL):
+    """The mesh's own coordinates in its plane (n,2), when ``V`` (n,3) lies within ``tol`` of a plane
+    and every triangle of ``F`` (m,3) keeps a positive area there (counter-clockwise); else None.
+
+    Such a mesh is flat: the conformal map of every boundary mode is the mesh itself up to a
+    similarity (``area`` and ``uniform``: an isometry, u = 0), which the solves would only reproduce
+    to round-off. ``V`` in units of its half span (``normalise_scale``)."""
+    c = V.mean(axis=0)
+    w, R = np.linalg.eigh((V - c).T @ (V - c))         # ascending: R[:, 0] is the normal
+    if np.abs((V - c) @ R[:, 0]).max() > tol:
+        return None
+    P = (V - c) @ R[:, 1:]
+    W = P[F]
+    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
+    a = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    if a.sum() < 0:
+        P[:, 1], a = -P[:, 1], -a
+    return P if (a > 0).all() else None
 
 
 def _bound(system, mask):
