@@ -35,7 +35,7 @@ sys.path.insert(0, ROOT)
 
 import numpy as np
 
-from core.atlas.cones import ConeSystem, cone_unwrap
+from core.atlas.cones import ConeSystem, cone_unwrap, weighted_spread
 from core.atlas.islands import cut_along_seams
 from core.io.obj import read_obj
 from core.mesh import topology
@@ -105,6 +105,10 @@ def xatlas_row(V, F):
     det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
     major = np.sign(np.bincount(chart, np.sign(det), minlength=nchart))
     m['flips'] = int((np.sign(det) != major[chart]).sum())
+    # the acceptance measure: area-weighted 1%/99% of the scale sqrt(|A_uv| / A_3d), as for the cones
+    Vc = V[vmap].astype(np.float64)
+    a3 = 0.5 * np.linalg.norm(np.cross(Vc[idx[:, 1]] - Vc[idx[:, 0]], Vc[idx[:, 2]] - Vc[idx[:, 0]]), axis=1)
+    m['mu_ratio_p1_p99_area'] = weighted_spread(np.sqrt(0.5 * np.abs(det) / np.maximum(a3, 1e-300)), a3)
     # seams: boundary edges of the chart mesh, as input edges (both copies give the same key)
     E, _ = topology.unique_edges(F)
     total = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).sum()

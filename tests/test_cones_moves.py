@@ -14,9 +14,9 @@ def test_batch_spread_is_face_spread_per_column():
     sy = ConeSystem(V, F)
     rng = np.random.default_rng(1)
     U = rng.normal(size=(sy.n, 7)) * np.linspace(0.1, 2.0, 7)
-    for U in (U, np.round(U, 1)):                     # and with ties
-        got = _batch_spread(sy.F, sy.A, U)
-        want = [face_spread(sy.F, sy.A, U[:, j]) for j in range(U.shape[1])]
+    for X in (U, np.round(U, 1)):                     # and with ties
+        got = _batch_spread(sy.F, sy.A, X)
+        want = [face_spread(sy.F, sy.A, X[:, j]) for j in range(X.shape[1])]
         assert list(got) == want
 
 

@@ -80,7 +80,7 @@ SPARSE_LAMBDA = 0.1                # the L2 start's penalty weight (times 1/n; s
 SPARSE_ITERS = 15                  # reweighting rounds of the L2 start
 ALT_MARGIN = 0.02                  # another placement is laid out when its estimate beats the realised
                                    # ratio of the best clean layout by this much
-SPREAD_PARTIAL_MIN = 4096        # face_spread over more triangles: the tails only (``_weighted_tails``, the same numbers)
+SPREAD_PARTIAL_MIN = 4096        # face_spread over more triangles: the tails only (``_weighted_tails``)
 SPARSE_POOL = 3                    # the L2 start places SPARSE_POOL times the cones, then thins them
 
 
@@ -472,7 +472,8 @@ def _batch_spread(F, A, U, q=1.0):
     while 2 * k <= m:
         part = np.argpartition(uf, (k - 1, m - k), axis=0)
         lo_i, hi_i = part[:k], part[m - k:]
-        if (A[lo_i].sum(0) > q * total * (1 + 1e-9)).all() and (A[hi_i].sum(0) > q * total * (1 + 1e-9)).all():
+        need = q * total * (1 + 1e-9)
+        if (A[lo_i].sum(0) > need).all() and (A[hi_i].sum(0) > need).all():
             o = np.take_along_axis(lo_i, np.argsort(np.take_along_axis(uf, lo_i, 0), axis=0), 0)
             j = (np.cumsum(A[o], axis=0) < q * total).sum(0)     # the first reaching q of the area
             lo = uf[o[j, cols], cols]

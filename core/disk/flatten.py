@@ -352,8 +352,9 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     if uv is not None:
         # a mesh lying in a plane is its own conformal map in every mode: an isometry (u = 0, mu = 1
         # on every triangle), so the optimum of ``uniform`` and its certified bound are both 1
-        report = {'boundary': boundary, 'vertices': len(V), 'faces': len(F), 'boundary_vertices': int(len(loop)),
-                  'operators': {'mode': operators, 'intrinsic': False}, 'solver': None,
+        report = {'boundary': boundary, 'vertices': len(V), 'faces': len(F),
+                  'boundary_vertices': int(len(loop)), 'operators': {'mode': operators, 'intrinsic': False},
+                  'solver': None,
                   'planar': 'the mesh lies in a plane: its own coordinates are the map (no solve)'}
         if boundary == 'uniform' and (bound or (bound is None and len(F) <= AUTO_BOUND_FACES)):
             report['bound_vertex'] = 1.0
