@@ -297,7 +297,8 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     arrays with checks at least as strict as the disk check (``unwrap``'s disk dispatch); the checks
     are then not repeated. Extra ``options`` go to ``core.disk.uniform.optimise``.
     Returns ``FlattenResult``; ``report['warnings']`` (list of str) lists flips, qc_mean above 1.5,
-    fallbacks. Raises ``ConformalError`` on bad input."""
+    fallbacks; ``report['planar']`` says when the mesh lies in a plane (``planar_map``: its own
+    coordinates are the map, no solve). Raises ``ConformalError`` on bad input."""
     # LSCM has no maximum principle to restore and measures slightly worse on the intrinsic
     # triangulation of smooth grids (bench/flatten_table.py): 'auto' tries the mesh's own weights first
     first, second = ('extrinsic', 'intrinsic') if boundary == 'free' else ('auto', 'extrinsic')
