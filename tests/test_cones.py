@@ -445,21 +445,24 @@ def test_krylov_newton_reaches_the_same_flat_metric():
 
 def test_fast_paths_equal_the_plain_computations():
     """The big-mesh shortcuts give the same numbers as the plain computations: the weighted 1%/99%
-    tails from ``argpartition`` (``_weighted_tails``) against the full sort, a cut's half-edge twins
-    derived from the mesh's (``_cut_twins``) against ``topology.twin_halfedges``, ``is_disk`` with
-    known twins, and the Green's columns in and out of their insertion order."""
-    from core.atlas.cones import _cut_twins, _weighted_tails
+    tails from ``argpartition`` (``_weighted_quantiles``, one column and a stack) against the full
+    sort, a cut's half-edge twins derived from the mesh's (``_cut_twins``) against
+    ``topology.twin_halfedges``, ``is_disk`` with known twins, and the Green's columns in and out of
+    their insertion order."""
+    from core.atlas.cones import _cut_twins, _weighted_quantiles
     rng = np.random.default_rng(3)
     for t in range(40):
         m = int(rng.integers(200, 4000))
-        x = rng.normal(size=m) if t % 2 else np.round(rng.normal(size=m), 1)      # with ties
+        X = rng.normal(size=(m, 1 + t % 4))
+        X = X if t % 2 else np.round(X, 1)                                       # with ties
         w = rng.exponential(size=m) ** (1 + 2 * (t % 3))                         # uneven weights
-        lo, hi = _weighted_tails(x, w, 0.01)
-        order = np.argsort(x)
-        c = np.cumsum(w[order])
-        c /= c[-1]
-        assert lo == x[order[np.searchsorted(c, 0.01)]]
-        assert hi == x[order[min(np.searchsorted(c, 0.99), m - 1)]]
+        lo, hi = _weighted_quantiles(X, w, 0.01)
+        for j, x in enumerate(X.T):
+            order = np.argsort(x)
+            c = np.cumsum(w[order])
+            c /= c[-1]
+            assert lo[j] == x[order[np.searchsorted(c, 0.01)]]
+            assert hi[j] == x[order[min(np.searchsorted(c, 0.99), m - 1)]]
     V, F = blob(8)
     n = len(V)
     tw = topology.twin_halfedges(F, n)

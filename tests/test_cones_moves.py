@@ -8,8 +8,9 @@ from core.surfaces import blob
 
 
 def test_batch_spread_is_face_spread_per_column():
-    """The batch sorts only the two tails of each column (``argpartition``): the same numbers as
-    ``face_spread``'s full sort, to the bit, with ties too."""
+    """The batch (face means of a stack of columns, their tails from ``argpartition``) gives
+    ``face_spread``'s numbers for every column, to the bit, with ties too; the tails against a full
+    sort: ``test_cones.test_fast_paths_equal_the_plain_computations``."""
     V, F = blob(6)
     sy = ConeSystem(V, F)
     rng = np.random.default_rng(1)

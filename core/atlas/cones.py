@@ -80,7 +80,6 @@ SPARSE_LAMBDA = 0.1                # the L2 start's penalty weight (times 1/n; s
 SPARSE_ITERS = 15                  # reweighting rounds of the L2 start
 ALT_MARGIN = 0.02                  # another placement is laid out when its estimate beats the realised
                                    # ratio of the best clean layout by this much
-SPREAD_PARTIAL_MIN = 4096        # face_spread over more triangles: the tails only (``_weighted_tails``)
 SPARSE_POOL = 3                    # the L2 start places SPARSE_POOL times the cones, then thins them
 
 
@@ -352,41 +351,42 @@ class ConeSystem:
 def face_spread(F, A, u, q=1.0):
     """Area-weighted q% / (100-q)% spread of the per-triangle log scale (mean of the corners' u):
     ``exp(p_q - p_{100-q})``, the vertex-level estimate of the realised ``p1/p99`` (q = 1)."""
-    uf = u[F].mean(1)
-    if len(uf) > SPREAD_PARTIAL_MIN:
-        lo, hi = _weighted_tails(uf, A, q / 100)
-        if lo is not None:
-            return float(np.exp(lo - hi))
-    order = np.argsort(uf)
-    c = np.cumsum(A[order])
-    c /= c[-1]
-    lo = uf[order[np.searchsorted(c, q / 100)]]
-    hi = uf[order[min(np.searchsorted(c, 1 - q / 100), len(c) - 1)]]
-    return float(np.exp(lo - hi))
+    lo, hi = _weighted_quantiles(u[F].mean(1)[:, None], A, q / 100)
+    return float(np.exp(lo[0] - hi[0]))
 
 
-def _weighted_tails(x, w, q):
-    """The weighted ``q`` and ``1 - q`` quantiles (lo, hi) of ``x`` (m,) with nonnegative weights
-    ``w`` (m,), as ``face_spread``'s full sort defines them (lo: the first value in increasing order
-    whose cumulative weight reaches ``q`` of the total; hi: the first one reaching ``1 - q``), from
-    the two tails only: ``np.argpartition`` picks the ``k`` smallest and ``k`` largest values (``k``
-    doubled until their weight exceeds ``q`` of the total), which are sorted. O(m) instead of the
-    full sort's O(m log m) (big meshes: ``face_spread`` runs once per greedy cone). Returns
-    (None, None) when a tail would need more than half of the values (use the full sort)."""
-    m = len(x)
+def _weighted_quantiles(X, w, q):
+    """The weighted ``q`` and ``1 - q`` quantiles (lo, hi), (c,) each, of every column of ``X`` (m,c)
+    with nonnegative weights ``w`` (m,): lo the first value in increasing order whose cumulative
+    weight reaches ``q`` of the total, hi the first reaching ``1 - q``.
+
+    Only the two tails are sorted: ``np.argpartition`` picks the ``k`` lowest and ``k`` highest values
+    of every column, ``k`` doubled until each tail holds more than ``q`` of the weight; O(m) instead
+    of a full sort's O(m log m), with the same numbers (``face_spread`` runs once per greedy cone on
+    big meshes, ``_batch_spread`` on every screened candidate: the full sort took a quarter of a
+    one-click unwrap on small meshes, cheburashka 11 of 40 s). A tail that would need more than half
+    of the values falls back to the full sort."""
+    m, ncol = X.shape
+    cols = np.arange(ncol)
     total = float(w.sum())
     k = min(m, int(4 * q * m) + 64)
     while 2 * k <= m:
-        part = np.argpartition(x, (k - 1, m - k))
+        part = np.argpartition(X, (k - 1, m - k), axis=0)
         lo_i, hi_i = part[:k], part[m - k:]
-        if w[lo_i].sum() > q * total * (1 + 1e-9) and w[hi_i].sum() > q * total * (1 + 1e-9):
-            o = lo_i[np.argsort(x[lo_i])]
-            lo = x[o[np.searchsorted(np.cumsum(w[o]), q * total)]]
-            o = hi_i[np.argsort(-x[hi_i])]
-            j = np.searchsorted(np.cumsum(w[o]), q * total, side='right')
-            return lo, x[o[j]]
+        need = q * total * (1 + 1e-9)
+        if (w[lo_i].sum(0) > need).all() and (w[hi_i].sum(0) > need).all():
+            o = np.take_along_axis(lo_i, np.argsort(np.take_along_axis(X, lo_i, 0), axis=0), 0)
+            j = (np.cumsum(w[o], axis=0) < q * total).sum(0)     # the first reaching q of the weight
+            lo = X[o[j, cols], cols]
+            o = np.take_along_axis(hi_i, np.argsort(-np.take_along_axis(X, hi_i, 0), axis=0), 0)
+            j = (np.cumsum(w[o], axis=0) <= q * total).sum(0)    # from the top: 1 - q reached
+            return lo, X[o[j, cols], cols]
         k *= 2
-    return None, None
+    order = np.argsort(X, axis=0)
+    c = np.cumsum(w[order], axis=0)
+    c /= c[-1]
+    lo = X[order[(c < q).sum(0).clip(0, m - 1), cols], cols]
+    return lo, X[order[(c < 1 - q).sum(0).clip(0, m - 1), cols], cols]
 
 
 def weighted_spread(x, w, q=1.0):
@@ -457,36 +457,9 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
 
 def _batch_spread(F, A, U, q=1.0):
     """Area-weighted q%/(100-q)% spread of the per-triangle scale for each column of ``U`` (n,c):
-    ``face_spread`` of every column at once. Returns (c,).
-
-    Only the two tails are sorted (``_weighted_tails`` for a stack of columns): ``np.argpartition``
-    picks the ``k`` lowest and ``k`` highest triangles of every column, ``k`` doubled until each tail
-    holds more than q% of the area; the full sort of all m triangles of all c columns took a quarter
-    of a one-click unwrap on small meshes (cheburashka: 11 of 40 s)."""
+    ``face_spread`` of every column at once. Returns (c,)."""
     uf = (U[F[:, 0]] + U[F[:, 1]] + U[F[:, 2]]) / 3.0           # (m,c): U[F].mean(1), to the bit
-    m, ncol = uf.shape
-    cols = np.arange(ncol)
-    q = q / 100
-    total = float(A.sum())
-    k = min(m, int(4 * q * m) + 64)
-    while 2 * k <= m:
-        part = np.argpartition(uf, (k - 1, m - k), axis=0)
-        lo_i, hi_i = part[:k], part[m - k:]
-        need = q * total * (1 + 1e-9)
-        if (A[lo_i].sum(0) > need).all() and (A[hi_i].sum(0) > need).all():
-            o = np.take_along_axis(lo_i, np.argsort(np.take_along_axis(uf, lo_i, 0), axis=0), 0)
-            j = (np.cumsum(A[o], axis=0) < q * total).sum(0)     # the first reaching q of the area
-            lo = uf[o[j, cols], cols]
-            o = np.take_along_axis(hi_i, np.argsort(-np.take_along_axis(uf, hi_i, 0), axis=0), 0)
-            j = (np.cumsum(A[o], axis=0) <= q * total).sum(0)    # from the top: 1 - q reached
-            hi = uf[o[j, cols], cols]
-            return np.exp(lo - hi)
-        k *= 2
-    order = np.argsort(uf, axis=0)
-    c = np.cumsum(A[order], axis=0)
-    c /= c[-1]
-    lo = uf[order[(c < q).sum(0).clip(0, len(A) - 1), cols], cols]
-    hi = uf[order[(c < 1 - q).sum(0).clip(0, len(A) - 1), cols], cols]
+    lo, hi = _weighted_quantiles(uf, A, q / 100)
     return np.exp(lo - hi)
 
 
