@@ -42,7 +42,7 @@ from scipy.optimize import linprog
 
 from ..errors import ConformalError
 from ..mesh import topology
-from ..mesh.geometry import angle_sums, face_areas
+from ..mesh.geometry import angle_sums, face_areas, face_means
 from ..mesh.intrinsic import corner_angles as corner_angles_l
 from ..mesh.intrinsic import corner_cotangents as corner_cotangents_l
 from ..mesh.intrinsic import face_areas as face_areas_l
@@ -458,8 +458,7 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
 def _batch_spread(F, A, U, q=1.0):
     """Area-weighted q%/(100-q)% spread of the per-triangle scale for each column of ``U`` (n,c):
     ``face_spread`` of every column at once. Returns (c,)."""
-    uf = (U[F[:, 0]] + U[F[:, 1]] + U[F[:, 2]]) / 3.0           # (m,c): U[F].mean(1), to the bit
-    lo, hi = _weighted_quantiles(uf, A, q / 100)
+    lo, hi = _weighted_quantiles(face_means(U, F), A, q / 100)
     return np.exp(lo - hi)
 
 

@@ -453,9 +453,7 @@ def planar_map(V, F, tol=PLANAR_TOL):
     if np.abs((V - c) @ R[:, 0]).max() > tol:
         return None
     P = (V - c) @ R[:, 1:]
-    W = P[F]
-    e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
-    a = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    a = signed_uv_areas(P, F)
     if a.sum() < 0:
         P[:, 1], a = -P[:, 1], -a
     return P if (a > 0).all() else None

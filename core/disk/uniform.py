@@ -23,6 +23,7 @@ import scipy.sparse as sp
 
 from ..background import Background
 from ..errors import ConformalError
+from ..mesh.geometry import face_means
 from ..mesh.measures import singular_values
 
 
@@ -241,8 +242,7 @@ def _face_means(H, T):
 def _representatives(system, uv, s, keep, bins):
     """Indices into ``s`` (the counted triangles) of the highest and the lowest triangle in each cell
     of a ``bins`` x ``bins`` grid over the UV map ``uv`` (n,2)."""
-    Fk = system.F[keep]
-    C = (uv[Fk[:, 0]] + uv[Fk[:, 1]] + uv[Fk[:, 2]]) / 3.0
+    C = face_means(uv, system.F[keep])
     lo, hi = C.min(0), C.max(0)
     ij = np.minimum(((C - lo) / np.maximum(hi - lo, 1e-300) * bins).astype(np.int64), bins - 1)
     cell = ij[:, 0] * bins + ij[:, 1]

@@ -22,6 +22,13 @@ def cross(a, b):
     return out
 
 
+def face_means(X, F):
+    """Mean (m,...) of ``X`` (n,...) over the three corners of each triangle of ``F`` (m,3): the same
+    numbers as ``X[F].mean(1)`` (corners added in order, then divided by 3), without its (m,3,...)
+    temporary."""
+    return (X[F[:, 0]] + X[F[:, 1]] + X[F[:, 2]]) / 3.0
+
+
 def norm3(x):
     """Euclidean length along the last axis (of length 3) of ``x`` (...,3): the same numbers as
     ``np.linalg.norm(x, axis=-1)`` (squares summed in the same order), about five times faster."""
