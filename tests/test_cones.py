@@ -483,3 +483,39 @@ def test_fast_paths_equal_the_plain_computations():
     assert np.array_equal(a[:, [2, 0]], b[:, :2]) and b.flags['C_CONTIGUOUS']
     r = sy.L @ b[:, 2]                                  # grounded at vertex 0: L x = e_99 elsewhere
     assert b[0, 2] == 0 and np.abs(r[1:] - np.eye(1, n, 99)[0][1:]).max() < 1e-8
+
+
+def test_untangle_unfolds_a_needle_with_two_corners_on_the_cut():
+    """A fold that ``untangle`` must repair by moving only the free corner: a flat grid disk whose
+    interior vertex next to the boundary is pushed across a boundary edge's line (the needle case of
+    cow at 8 cones: two corners on the cut, which must not move). After the repair no triangle is
+    folded, the boundary is untouched and the vertex moved no farther than the clearance needs."""
+    from core.atlas.cones import untangle
+    from core.mesh.measures import signed_uv_areas
+    k = 6
+    g = np.linspace(0.0, 1.0, k + 1)
+    X, Y = np.meshgrid(g, g, indexing='ij')
+    uv = np.c_[X.ravel(), Y.ravel()]
+    i, j = np.meshgrid(np.arange(k), np.arange(k), indexing='ij')
+    a = (i * (k + 1) + j).ravel()
+    F = np.r_[np.stack([a, a + k + 1, a + k + 2], 1), np.stack([a, a + k + 2, a + 1], 1)]
+    assert (signed_uv_areas(uv, F) > 0).all()
+    loop = topology.boundary_loops(F, len(uv))[0]
+    v = 1 * (k + 1) + 1                                   # interior, next to the corner (0, 0)
+    bad = uv.copy()
+    bad[v] = [0.5 / k, -0.3 / k]                          # across the bottom boundary
+    assert (signed_uv_areas(bad, F) <= 0).sum() >= 1
+    fixed = bad.copy()
+    moved = untangle(F, fixed, loop)
+    assert moved >= 1
+    assert (signed_uv_areas(fixed, F) > 0).all()
+    np.testing.assert_array_equal(fixed[loop], bad[loop])
+    others = np.setdiff1d(np.arange(len(uv)), [v])
+    np.testing.assert_array_equal(fixed[others], bad[others])
+    # rings without a kernel (every vertex on one line: each ring's edges run both ways along it)
+    # are left alone
+    flat = uv.copy()
+    flat[:, 1] = 0.0
+    before = flat.copy()
+    assert untangle(F, flat, loop) == 0
+    np.testing.assert_array_equal(flat, before)

@@ -61,6 +61,8 @@ ANGLE_FLOORS = (-2.0, -1.0, 0.1)   # lower bounds of the angle candidates laid o
 BIG_MESH = 20_000                  # above this many vertices: fewer candidates and no cone moves
 DEGENERATE_QC = 1e3                # a layout triangle with s1/s2 above this counts as degenerate
 REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
+UNTANGLE_ROUNDS = 3                # then sweeps of single-vertex moves over the corners still folded
+UNTANGLE_MARGIN = 0.5              # ... each to this fraction of its best clearance (``untangle``)
 QC_WARN = 1.1                      # the layout's qc_mean above this is reported (the discrete
                                    # conformal map of a coarse mesh with strong cones is not exact)
 L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (placement, first run)
@@ -1192,6 +1194,64 @@ def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS, Vc=None):
     return rounds
 
 
+def untangle(Fc, uv, loop, rounds=UNTANGLE_ROUNDS, margin=UNTANGLE_MARGIN):
+    """Last local repair of a layout ``uv`` (N,2), in place: each free vertex (not on the cut disk's
+    boundary ``loop`` (nb,)) of a folded triangle of ``Fc`` (m,3) moves the least (L1) that puts it at
+    least ``margin`` times its best clearance on the left of the opposite edge of every triangle
+    around it. The best clearance is the largest ``t`` such that the vertex can stand ``t`` from each
+    of those edges (a Chebyshev centre of the ring's kernel, a linear program); a ring without a
+    kernel is left alone. Needed where ``_relax_folds`` cannot reach: a needle triangle with two
+    corners on the cut, whose copies must stay congruent, so only its third corner may move. The loop
+    runs over the corners of folded triangles only (a handful). Returns the number of vertices moved."""
+    from scipy.optimize import linprog
+    moved = 0
+    fixed = np.zeros(len(uv), bool)
+    fixed[loop] = True
+
+    def folded():
+        area = signed_uv_areas(uv, Fc)
+        return area <= 1e-14 * np.abs(area).sum()
+
+    bad = folded()
+    for _ in range(rounds):
+        verts = np.unique(Fc[bad])
+        verts = verts[~fixed[verts]]
+        if not len(verts):
+            break
+        for v in verts.tolist():
+            rows, k = np.nonzero(Fc == v)
+            a = uv[Fc[rows, (k + 1) % 3]]                     # (r,2) the corners after v (ccw)
+            b = uv[Fc[rows, (k + 2) % 3]]
+            d = b - a
+            ln = np.linalg.norm(d, axis=1)
+            if not (ln > 0).all():
+                continue
+            # clearance of p from edge a->b: ((b - a) x (p - a)) / |b - a| = (g . p + h) / |b - a|
+            g = np.stack([-d[:, 1], d[:, 0]], 1) / ln[:, None]
+            h = (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) / ln
+            lo, hi = np.minimum(a, b).min(0), np.maximum(a, b).max(0)
+            # max t  s.t.  g p + h >= t   (variables p0, p1, t)
+            res = linprog([0, 0, -1], A_ub=np.c_[-g, np.ones(len(g))], b_ub=h,
+                          bounds=[(lo[0], hi[0]), (lo[1], hi[1]), (None, None)], method='highs')
+            if res.status != 0 or not res.x[2] > 0:
+                continue
+            t = margin * res.x[2]
+            # min |p - p0|_1  s.t.  g p + h >= t   (variables p0, p1, s0, s1 >= |p - p0|)
+            p0 = uv[v]
+            A_ub = np.r_[np.c_[-g, np.zeros((len(g), 2))],
+                         [[1, 0, -1, 0], [-1, 0, -1, 0], [0, 1, 0, -1], [0, -1, 0, -1]]]
+            b_ub = np.r_[h - t, p0[0], -p0[0], p0[1], -p0[1]]
+            res = linprog([0, 0, 1, 1], A_ub=A_ub, b_ub=b_ub,
+                          bounds=[(None, None), (None, None), (0, None), (0, None)], method='highs')
+            if res.status == 0:
+                uv[v] = res.x[:2]
+                moved += 1
+        bad = folded()
+        if not bad.any():
+            break
+    return moved
+
+
 def _wedge_middle(Vc, Fc, loop, corner):
     """The neighbour of boundary vertex ``corner`` of the cut disk that halves its wedge by angle
     (walking the fan of triangles from the next boundary vertex to the previous one)."""
@@ -1315,6 +1375,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
             info['flat_triangles'] = got[2]
             info['u_exact'] = got[0]
             info['repair_rounds'] = _relax_folds(Fc, loop, uv, Lc, Vc=Vc)
+            info['untangled'] = untangle(Fc, uv, loop)
             return cut, loop, uv, seams, info
     P = paired_polygon(kt, lt, pair.ravel())
     uv = _harmonic(Lc, loop, P, cache)
@@ -1332,6 +1393,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         uv = _harmonic(clamped_laplacian(Lc, mark), loop, P)
         repaired += 1
     info['repair_rounds'] = repaired
+    info['untangled'] = untangle(Fc, uv, loop)
     return cut, loop, uv, seams, info
 
 
