@@ -519,3 +519,16 @@ def test_untangle_unfolds_a_needle_with_two_corners_on_the_cut():
     before = flat.copy()
     assert untangle(F, flat, loop) == 0
     np.testing.assert_array_equal(flat, before)
+
+
+def test_cow_at_eight_cones_has_no_folded_triangle():
+    """The one row of the Pareto table (docs/cones.md) that kept a folded triangle before ``untangle``:
+    cow at exactly 8 cones, where a 3-degree needle with two corners on the cut folds in every angle
+    candidate's layout."""
+    from core.io.obj import read_obj
+    import os
+    m = read_obj(os.path.join(os.path.dirname(__file__), 'data', 'cow.obj'))
+    F, _ = m.triangles()
+    rep = cone_unwrap(m.V, F, cones=None, target_ratio=None, max_cones=8).report
+    assert rep['cones'] == 8
+    assert rep['flips'] == 0 and rep['overlaps'] == 0 and rep['degenerate'] == 0
