@@ -171,6 +171,60 @@ def table(names, budgets, anchor, use_xatlas, auto=True, per_mesh=None):
                 print(f"| {name} | xatlas | not installed (pip install xatlas; benchmarks only) |")
 
 
+CORPUS_REST = ['alligator', 'woody', 'suzanne', 'teapot', 'stanford-bunny', 'beast', 'ogre']
+SURFACES = ['bump', 'bump3', 'edgebump', 'ridge', 'saddle']
+
+
+def corpus_rows(names, budgets, auto=True, n=65):
+    """The Pareto rows of every other mesh (disks, holes, several parts, messy input) and of the
+    generated surfaces at ``n`` (disks), through ``core.unwrap(V, F, cones=N)`` (a budget per part;
+    'auto': target 0.5), as a user's one call does: the core repairs and splits the input itself.
+    Measured per triangle on the per-corner output (``uv_corner``), at true scale, over every
+    flattened triangle: mu_ratio, area-weighted p1/p99, qc_mean, flips (against each island's own
+    orientation), the report's overlaps, and the chosen seams' length over all edges."""
+    from core import make_surface, unwrap
+    from core.mesh.measures import jacobians, measures_from_jacobians
+    print('| mesh | triangles | cones | islands | seam | mu_ratio | p1/p99 (area) | qc_mean | flips '
+          '| overlaps | s | warnings |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|')
+    for name in names:
+        if name in SURFACES:
+            V, F = make_surface(name, n)
+            label = f'{name} {n}'
+        else:
+            got = load(name)
+            if got is None:
+                continue
+            V, F = got
+            label = name
+        E, _ = topology.unique_edges(F)
+        total = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).sum()
+        for N in list(budgets) + (['auto'] if auto else []):
+            t = time.perf_counter()
+            try:
+                res = unwrap(V, F, cones=N, target_ratio=0.5)
+            except Exception as exc:                      # a row that fails is a finding: print it
+                print(f"| {label} | {len(F)} | {N} | error: {exc} |", flush=True)
+                continue
+            dt = time.perf_counter() - t
+            ok = res.flattened
+            Fk = F[ok]
+            Vc = V[Fk].reshape(-1, 3)
+            Fc = np.arange(3 * len(Fk)).reshape(-1, 3)
+            J, A = jacobians(Vc, Fc, res.uv_corner[ok].reshape(-1, 2))
+            me, mu = measures_from_jacobians(J, A)
+            det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+            isl = res.face_island[ok]
+            major = np.sign(np.bincount(isl, np.sign(det)))
+            flips = int((np.sign(det) != major[isl]).sum())
+            S = np.asarray(res.seams).reshape(-1, 2)
+            seam = np.linalg.norm(V[S[:, 0]] - V[S[:, 1]], axis=1).sum() / total if len(S) else 0.0
+            r = res.report
+            print(f"| {label} | {len(F)} | {N}: {len(res.cones)} | {r.get('islands', len(res.islands))} | "
+                  f"{seam:.4f} | {me['mu_ratio']:.3f} | {weighted_spread(mu, A):.3f} | {me['qc_mean']:.3f} | "
+                  f"{flips} | {r.get('overlaps', '-')} | {dt:.1f} | {len(res.warnings)} |", flush=True)
+
+
 def big(extra=False):
     """The speed rows: wall and CPU seconds (CPU: this process, all threads), the stage times of
     ``report['seconds']``, the peak resident memory of the process so far (it only grows from row to
@@ -217,11 +271,16 @@ def main():
     ap.add_argument('--big-extra', action='store_true',
                     help='with --big: also cheburashka, rocker-arm (subdivided once) and cow (twice)')
     ap.add_argument('--acceptance', action='store_true', help='only the MovingCones rows')
+    ap.add_argument('--corpus', nargs='*', default=None,
+                    help='the rows of the other corpus meshes and the generated surfaces through '
+                         'core.unwrap (names; none given: all of CORPUS_REST and SURFACES)')
     a = ap.parse_args()
     if a.big:
         big(a.big_extra)
     elif a.acceptance:
         table(list(MOVING_CONES), [], False, False, False, per_mesh=MOVING_CONES)
+    elif a.corpus is not None:
+        corpus_rows(a.corpus or CORPUS_REST + SURFACES, a.budgets, not a.no_auto)
     else:
         table(a.meshes, a.budgets, not a.no_anchor, not a.no_xatlas, not a.no_auto)
 

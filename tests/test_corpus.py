@@ -204,3 +204,16 @@ def test_whole_corpus_unwraps_or_gives_the_one_error(name, tmp_path):
         assert res.report['failed'] > 0 and res.report['flattened'] > 0
         assert res.warnings
         _check_corpus_result(res, F)
+
+
+@pytest.mark.parametrize('name,budget', [('suzanne', 8), ('teapot', 4)])
+def test_cone_budgets_on_small_and_messy_parts(name, budget, tmp_path):
+    """Automatic seams with a fixed cone budget per part on meshes of many small parts (bench/cones.py
+    --corpus found both): suzanne's eyes have fewer vertices than the budget's cone rings cover (the
+    report's ring-free ratio has no vertex left), and a branch added under a wide cone of a teapot part
+    was straightened into a cut that no longer opened the part into a disk."""
+    from core import unwrap as core_unwrap
+    V, F, tp, _ = _load_corpus(name, tmp_path)
+    res = core_unwrap(V, F, cones=budget, tri_poly=tp)
+    _check_corpus_result(res, F)
+    assert res.report['islands'] >= 3

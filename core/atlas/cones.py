@@ -1359,9 +1359,19 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         if new is None:
             failed.add(c)                    # try the next corner; this one keeps its wedge
             continue
-        seams = straighten(F, new, stop)
-        if c2 is not None and np.array_equal(np.unique(np.sort(new, 1), axis=0), seams):
-            reuse = c2                       # straightening changed nothing: that cut is this one
+        # the straightened branch, else the branch as found, whichever still opens the surface into a
+        # disk (straightening can make a path touch the boundary or the cut elsewhere: teapot's lid)
+        reuse = None
+        for cand in (straighten(F, new, stop), new):
+            cand = np.unique(np.sort(np.asarray(cand, np.int64).reshape(-1, 2), 1), axis=0)
+            c3 = c2 if c2 is not None and np.array_equal(np.unique(np.sort(new, 1), axis=0), cand) \
+                else cut_along_seams(F, n, cand, twin=twin)
+            if c3.n_islands == 1 and is_disk(c3.F, len(c3.vert_of), twin=_cut_twins(c3.F, twin)):
+                seams, reuse = cand, c3
+                break
+        if reuse is None:
+            failed.add(c)                    # no branch keeps a disk: this corner keeps its wedge
+            continue
         added += 1
     a, b = vert_of[loop], vert_of[np.roll(loop, -1)]
     key = np.minimum(a, b) * n + np.maximum(a, b)
@@ -1909,7 +1919,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         'repair_rounds': linfo['repair_rounds'], 'exact_layout': linfo['exact'],
         'charts': linfo['charts'], 'chart_splits': linfo['splits'],
         'vertex_ratio': float(np.exp(u.min() - u.max())),
-        'vertex_ratio_outside_rings': float(np.exp(u[rows].min() - u[rows].max())),
+        'vertex_ratio_outside_rings': float(np.exp(u[rows].min() - u[rows].max())) if rows.any() else None,
         'estimated_p1_p99': face_spread(Fw, system.A, u),
         'target_ratio': target_ratio,
         'placement': [(int(c), float(s)) for c, s in history],
