@@ -1220,8 +1220,15 @@ def untangle(Fc, uv, loop, rounds=UNTANGLE_ROUNDS, margin=UNTANGLE_MARGIN):
             break
         for v in verts.tolist():
             rows, k = np.nonzero(Fc == v)
-            a = uv[Fc[rows, (k + 1) % 3]]                     # (r,2) the corners after v (ccw)
-            b = uv[Fc[rows, (k + 2) % 3]]
+            # in the ring's own frame (centred on v, its size as unit): the solver's tolerances are
+            # absolute, and a folded ring can be a millionth of the layout (beast at 8 cones)
+            p0 = uv[v]
+            a = uv[Fc[rows, (k + 1) % 3]] - p0                # (r,2) the corners after v (ccw)
+            b = uv[Fc[rows, (k + 2) % 3]] - p0
+            size = float(np.abs(np.r_[a, b]).max())
+            if not size > 0:
+                continue
+            a, b = a / size, b / size
             d = b - a
             ln = np.linalg.norm(d, axis=1)
             if not (ln > 0).all():
@@ -1229,22 +1236,20 @@ def untangle(Fc, uv, loop, rounds=UNTANGLE_ROUNDS, margin=UNTANGLE_MARGIN):
             # clearance of p from edge a->b: ((b - a) x (p - a)) / |b - a| = (g . p + h) / |b - a|
             g = np.stack([-d[:, 1], d[:, 0]], 1) / ln[:, None]
             h = (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) / ln
-            lo, hi = np.minimum(a, b).min(0), np.maximum(a, b).max(0)
-            # max t  s.t.  g p + h >= t   (variables p0, p1, t)
+            # max t  s.t.  g p + h >= t   (variables p0, p1, t; p within the ring's box)
             res = linprog([0, 0, -1], A_ub=np.c_[-g, np.ones(len(g))], b_ub=h,
-                          bounds=[(lo[0], hi[0]), (lo[1], hi[1]), (None, None)], method='highs')
-            if res.status != 0 or not res.x[2] > 0:
+                          bounds=[(-1, 1), (-1, 1), (None, None)], method='highs')
+            if res.status != 0 or not res.x[2] > 1e-9:
                 continue
             t = margin * res.x[2]
-            # min |p - p0|_1  s.t.  g p + h >= t   (variables p0, p1, s0, s1 >= |p - p0|)
-            p0 = uv[v]
+            # min |p|_1  s.t.  g p + h >= t   (variables p0, p1, s0, s1 >= |p|)
             A_ub = np.r_[np.c_[-g, np.zeros((len(g), 2))],
                          [[1, 0, -1, 0], [-1, 0, -1, 0], [0, 1, 0, -1], [0, -1, 0, -1]]]
-            b_ub = np.r_[h - t, p0[0], -p0[0], p0[1], -p0[1]]
+            b_ub = np.r_[h - t, 0.0, 0.0, 0.0, 0.0]
             res = linprog([0, 0, 1, 1], A_ub=A_ub, b_ub=b_ub,
                           bounds=[(None, None), (None, None), (0, None), (0, None)], method='highs')
             if res.status == 0:
-                uv[v] = res.x[:2]
+                uv[v] = p0 + size * res.x[:2]
                 moved += 1
         bad = folded()
         if not bad.any():
