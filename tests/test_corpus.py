@@ -217,3 +217,20 @@ def test_cone_budgets_on_small_and_messy_parts(name, budget, tmp_path):
     res = core_unwrap(V, F, cones=budget, tri_poly=tp)
     _check_corpus_result(res, F)
     assert res.report['islands'] >= 3
+
+
+def test_zero_area_faces_with_automatic_seams():
+    """A closed surface with a zero-area triangle (three different vertices in a line, as in ogre)
+    gets automatic seams: the triangle is mollified as on the island path, listed among the repairs,
+    and left out of the measures; the rest of the layout is clean."""
+    from core import unwrap as core_unwrap
+    from core.surfaces import blob
+    V, F = blob(8)
+    V = V.copy()
+    i, a, b = F[0]
+    V[i] = 0.5 * (V[a] + V[b])                         # face 0 is now a segment
+    res = core_unwrap(V, F, cones=6)
+    assert any(x['repair'] == 'zero_area_faces_mollified' for x in res.report['repairs'])
+    assert res.report['flips'] == 0 and res.report['overlaps'] == 0
+    assert np.isfinite(res.uv_corner).all()
+    assert np.isnan(res.mu[0]) and np.isfinite(np.delete(res.mu, 0)).all()

@@ -50,7 +50,8 @@ from ..mesh.intrinsic import intrinsic_delaunay, layout
 from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, singular_values
 from ..mesh.solve import Factor
-from ..mesh.validate import DEFAULT_MAX_FACES, as_arrays, check_arrays, check_mesh, normalise_scale
+from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_arrays, check_mesh, degenerate_faces,
+                             normalise_scale)
 from .cutgraph import cut_graph, is_disk, reroute_leaf, straighten, through_corner
 from .islands import boundary_crossings, cut_along_seams
 
@@ -61,6 +62,7 @@ ANGLE_FLOORS = (-2.0, -1.0, 0.1)   # lower bounds of the angle candidates laid o
 BIG_MESH = 20_000                  # above this many vertices: fewer candidates and no cone moves
 DEGENERATE_QC = 1e3                # a layout triangle with s1/s2 above this counts as degenerate
 REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
+MOLLIFY = 1e-4                     # intrinsic mollification of zero-area triangles (relative)
 UNTANGLE_ROUNDS = 3                # then sweeps of single-vertex moves over the corners still folded
 UNTANGLE_MARGIN = 0.5              # ... each to this fraction of its best clearance (``untangle``)
 QC_WARN = 1.1                      # the layout's qc_mean above this is reported (the discrete
@@ -117,10 +119,13 @@ class ConeSystem:
         self.V, self.F = V, F
         n = self.n = len(V)
         self.intrinsic = None
-        if intrinsic:
+        # zero-area triangles (three different vertices in a line) get a valid intrinsic metric by
+        # mollification and are left out of every measure (docs/robustness.md)
+        self.degenerate = degenerate_faces(V, F)
+        if intrinsic or self.degenerate.any():
             # the intrinsic Delaunay Laplacian (nonnegative interior weights: no spikes of u next to
             # needle triangles); Omega does not change under intrinsic flips (docs/robustness.md)
-            T = intrinsic_delaunay(V, F, mollify_delta=0.0)
+            T = intrinsic_delaunay(V, F, mollify_delta=MOLLIFY if self.degenerate.any() else 0.0)
             self.L = T.cotan_laplacian().tocsr()
             self.intrinsic = T
         else:
@@ -857,9 +862,10 @@ def _disk_laplacian(Vc, Fc, cache=None):
     key = (len(Vc), hash(Fc.tobytes()))
     if cache is not None and cache.get('disk_key') == key:
         return cache['disk']
-    T = intrinsic_delaunay(Vc, Fc, mollify_delta=0.0)
+    zero = degenerate_faces(Vc, Fc).any()
+    T = intrinsic_delaunay(Vc, Fc, mollify_delta=MOLLIFY if zero else 0.0)
     T.report['degree_flips'] = raise_low_degree(T)
-    L = T.cotan_laplacian().tocsr() if T.report['flips'] else cotan_laplacian(Vc, Fc)
+    L = T.cotan_laplacian().tocsr() if T.report['flips'] or zero else cotan_laplacian(Vc, Fc)
     if cache is not None:
         cache['disk_key'], cache['disk'], cache['disk_T'] = key, L, T
     return L
@@ -1151,6 +1157,8 @@ def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS, Vc=None):
     onb = np.zeros(N, bool)
     onb[loop] = True
     adj = None
+    if Vc is not None and degenerate_faces(Vc, Fc).any():
+        Vc = None                            # zero-area input triangles have no cotan weights
     if Vc is not None:
         W = -clamped_laplacian(cotan_laplacian(Vc, Fc), np.ones(N, bool))
         W.setdiag(0)
@@ -1203,7 +1211,6 @@ def untangle(Fc, uv, loop, rounds=UNTANGLE_ROUNDS, margin=UNTANGLE_MARGIN):
     kernel is left alone. Needed where ``_relax_folds`` cannot reach: a needle triangle with two
     corners on the cut, whose copies must stay congruent, so only its third corner may move. The loop
     runs over the corners of folded triangles only (a handful). Returns the number of vertices moved."""
-    from scipy.optimize import linprog
     moved = 0
     fixed = np.zeros(len(uv), bool)
     fixed[loop] = True
@@ -1438,16 +1445,20 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
         raise ConformalError("the cut disk's layout has no positive UV area: the mesh is numerically "
                              "degenerate", 'degenerate', 'clean_mesh')
     uvc = (uvc - uvc.mean(0)) * np.sqrt(system.A.sum() / a_uv)
-    J, A = jacobians(Vw[cut.vert_of], Fc, uvc)
+    good = ~system.degenerate                  # zero-area input triangles have no Jacobian
+    J, A = jacobians(Vw[cut.vert_of], Fc[good], uvc)
     measured, mu = measures_from_jacobians(J, A)
     measured['mu_ratio_p1_p99_area'] = weighted_spread(mu, A)
     sv = singular_values(J)
     # a triangle squashed to (nearly) nothing is as unusable as a flipped one
-    squashed = sv[:, 1] <= DEGENERATE_QC ** -1 * sv[:, 0]
+    squashed = np.zeros(len(Fc), bool)
+    squashed[good] = sv[:, 1] <= DEGENERATE_QC ** -1 * sv[:, 0]
     measured['degenerate'] = int(squashed.sum())
     W = uvc[Fc]
     e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
-    bad = np.nonzero(squashed | (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0))[0]
+    folded = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0
+    measured['flips'] += int(folded[~good].sum())
+    bad = np.nonzero(squashed | folded)[0]
     return {'cut': cut, 'loop': loop, 'uv': uvc, 'seams': seams, 'info': info, 'measured': measured,
             'crossings': crossings, 'u': u, 'bad': bad}
 
@@ -1736,7 +1747,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     Fs, vert_of0, n_split = _split_nonmanifold(V, F)
     Vs = V[vert_of0]
     # drop vertices in no face (allowed: they get no UV and NaN u)
-    check_mesh(Vs, Fs, kind='surface', max_faces=max_faces, allow_loose=True)
+    check_mesh(Vs, Fs, kind='surface', max_faces=max_faces, allow_loose=True, allow_degenerate=True)
     keep = np.zeros(len(Vs), bool)
     keep[Fs.ravel()] = True
     newid = -np.ones(len(Vs), np.int64)

@@ -35,7 +35,7 @@ from ..errors import ConformalError
 from ..disk.flatten import flatten
 from ..mesh import topology
 from ..mesh.geometry import face_areas
-from ..mesh.repair import repair
+from ..mesh.repair import repair, zero_area_note
 from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, vertex_mu
 from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_mesh, degenerate_faces, loose_edge_count,
                              normalise_scale)
@@ -231,6 +231,9 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         disk = False                     # the island pipeline lists the loose edges it ignores
     if cones is not None:
         fixed = repair(Vs, Fs)                  # messy input: the same internal repairs as islands
+        zero = degenerate_faces(fixed.V, fixed.F)
+        if zero.any():                          # kept: cone_unwrap mollifies them, as islands do
+            fixed.repairs.append(zero_area_note(int(zero.sum())))
         uv_r, isl_r, islands, seams_r, cone_r = cone_layout(
             fixed.V, fixed.F, cones=cones, target_ratio=target_ratio, max_cones=max_cones, fit=fit,
             pack=pack, margin=margin, progress=progress)
