@@ -184,6 +184,7 @@ def corpus_rows(names, budgets, auto=True, n=65):
     orientation), the report's overlaps, and the chosen seams' length over all edges."""
     from core import make_surface, unwrap
     from core.mesh.measures import jacobians, measures_from_jacobians
+    from core.mesh.validate import degenerate_faces
     print('| mesh | triangles | cones | islands | seam | mu_ratio | p1/p99 (area) | qc_mean | flips '
           '| overlaps | s | warnings |')
     print('|---|---|---|---|---|---|---|---|---|---|---|---|')
@@ -207,7 +208,7 @@ def corpus_rows(names, budgets, auto=True, n=65):
                 print(f"| {label} | {len(F)} | {N} | error: {exc} |", flush=True)
                 continue
             dt = time.perf_counter() - t
-            ok = res.flattened
+            ok = res.flattened & ~degenerate_faces(V, F)       # zero-area triangles have no Jacobian
             Fk = F[ok]
             Vc = V[Fk].reshape(-1, 3)
             Fc = np.arange(3 * len(Fk)).reshape(-1, 3)
