@@ -1397,6 +1397,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
             info['flat_triangles'] = got[2]
             info['u_exact'] = got[0]
             info['repair_rounds'] = _relax_folds(Fc, loop, uv, Lc, Vc=Vc)
+            info['folded_raw'] = np.nonzero(signed_uv_areas(uv, Fc) <= 0)[0]
             info['untangled'] = untangle(Fc, uv, loop)
             return cut, loop, uv, seams, info
     P = paired_polygon(kt, lt, pair.ravel())
@@ -1415,6 +1416,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         uv = _harmonic(clamped_laplacian(Lc, mark), loop, P)
         repaired += 1
     info['repair_rounds'] = repaired
+    info['folded_raw'] = np.nonzero(signed_uv_areas(uv, Fc) <= 0)[0]
     info['untangled'] = untangle(Fc, uv, loop)
     return cut, loop, uv, seams, info
 
@@ -1459,8 +1461,11 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
     folded = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0
     measured['flips'] += int(folded[~good].sum())
     bad = np.nonzero(squashed | folded)[0]
+    # where the layout folded before ``untangle`` patched it: the cones next to those triangles are
+    # the ones ``softened`` relaxes (a patched fold still marks a cone whose metric degenerates)
+    soft = np.union1d(bad, info.get('folded_raw', np.zeros(0, np.int64)))
     return {'cut': cut, 'loop': loop, 'uv': uvc, 'seams': seams, 'info': info, 'measured': measured,
-            'crossings': crossings, 'u': u, 'bad': bad}
+            'crossings': crossings, 'u': u, 'bad': bad, 'soft': soft}
 
 
 def _mesh_twins(F, n, cache):
@@ -1859,7 +1864,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                 low[list(floors)] = list(floors.values())
                 yield (f"l2, {len(floors)} cone(s) next to flips >= {max(floors.values())}",
                        system.l2_angles(S, lower=low))
-                ev = last['ev'] if last.get('ev') is not None and len(last['ev']['bad']) else None
+                ev = last['ev'] if last.get('ev') is not None and len(last['ev']['soft']) else None
 
         import itertools
         for label, kap in itertools.chain(cands, corrected(), softened()):
@@ -1879,7 +1884,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                           'charts': ev['info']['charts']})
             defects = me['flips'] + ev['crossings'] + me['degenerate']
             key = (defects == 0, -defects, me['mu_ratio_p1_p99_area'])
-            if defects and len(ev['bad']) and (not dirty or key[2] > dirty[0]):
+            if defects and len(ev['soft']) and (not dirty or key[2] > dirty[0]):
                 dirty[:] = [key[2], ev]
             if best is None or key > best[0]:
                 best = (key, label, kap, ev)
@@ -1969,7 +1974,7 @@ def _cones_near_flips(system, Fw, ev, S):
     """(k,) bool: the cones ``S`` within one ring of a triangle that the layout ``ev`` (``_evaluate``)
     flips or squashes (``ev['bad']``; else the flips of ``ev['uv']`` on ``ev['cut'].F``, whose faces
     keep the order of ``Fw`` (m,3))."""
-    bad = ev.get('bad')
+    bad = ev.get('soft', ev.get('bad'))
     if bad is None:
         W = ev['uv'][ev['cut'].F]
         e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
