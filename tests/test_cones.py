@@ -506,7 +506,9 @@ def test_untangle_unfolds_a_needle_with_two_corners_on_the_cut():
     bad[v] = [0.5 / k, -0.3 / k]                          # across the bottom boundary
     assert (signed_uv_areas(bad, F) <= 0).sum() >= 1
     fixed = bad.copy()
-    moved = untangle(F, fixed, loop)
+    pin = np.zeros(len(uv), bool)
+    pin[loop] = True
+    moved = untangle(F, fixed, pin)
     assert moved >= 1
     assert (signed_uv_areas(fixed, F) > 0).all()
     np.testing.assert_array_equal(fixed[loop], bad[loop])
@@ -517,7 +519,7 @@ def test_untangle_unfolds_a_needle_with_two_corners_on_the_cut():
     flat = uv.copy()
     flat[:, 1] = 0.0
     before = flat.copy()
-    assert untangle(F, flat, loop) == 0
+    assert untangle(F, flat, pin) == 0
     np.testing.assert_array_equal(flat, before)
 
 

@@ -1202,18 +1202,18 @@ def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS, Vc=None):
     return rounds
 
 
-def untangle(Fc, uv, loop, rounds=UNTANGLE_ROUNDS, margin=UNTANGLE_MARGIN):
-    """Last local repair of a layout ``uv`` (N,2), in place: each free vertex (not on the cut disk's
-    boundary ``loop`` (nb,)) of a folded triangle of ``Fc`` (m,3) moves the least (L1) that puts it at
+def untangle(Fc, uv, pinned, rounds=UNTANGLE_ROUNDS, margin=UNTANGLE_MARGIN):
+    """Last local repair of a layout ``uv`` (N,2), in place: each free vertex (``pinned`` (N,) bool
+    False: not a copy of a vertex on the cut, whose copies must stay congruent; a vertex on the mesh's
+    own boundary is free) of a folded triangle of ``Fc`` (m,3) moves the least (L1) that puts it at
     least ``margin`` times its best clearance on the left of the opposite edge of every triangle
     around it. The best clearance is the largest ``t`` such that the vertex can stand ``t`` from each
     of those edges (a Chebyshev centre of the ring's kernel, a linear program); a ring without a
     kernel is left alone. Needed where ``_relax_folds`` cannot reach: a needle triangle with two
-    corners on the cut, whose copies must stay congruent, so only its third corner may move. The loop
-    runs over the corners of folded triangles only (a handful). Returns the number of vertices moved."""
+    corners on the cut, so that only its third corner may move. The loop runs over the corners of
+    folded triangles only (a handful). Returns the number of vertices moved."""
     moved = 0
-    fixed = np.zeros(len(uv), bool)
-    fixed[loop] = True
+    fixed = np.asarray(pinned, bool)
 
     def folded():
         area = signed_uv_areas(uv, Fc)
@@ -1262,6 +1262,15 @@ def untangle(Fc, uv, loop, rounds=UNTANGLE_ROUNDS, margin=UNTANGLE_MARGIN):
         if not bad.any():
             break
     return moved
+
+
+def _seam_copies(vert_of, seams, n):
+    """(N,) bool: the split vertices of a cut disk (``vert_of`` (N,) their mesh vertices, of ``n``)
+    that are copies of a vertex on the cut ``seams`` (k,2); a vertex only on the mesh's own boundary
+    is not one."""
+    on = np.zeros(n, bool)
+    on[np.asarray(seams, np.int64).ravel()] = True
+    return on[vert_of]
 
 
 def _wedge_middle(Vc, Fc, loop, corner):
@@ -1398,7 +1407,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
             info['u_exact'] = got[0]
             info['repair_rounds'] = _relax_folds(Fc, loop, uv, Lc, Vc=Vc)
             info['folded_raw'] = np.nonzero(signed_uv_areas(uv, Fc) <= 0)[0]
-            info['untangled'] = untangle(Fc, uv, loop)
+            info['untangled'] = untangle(Fc, uv, _seam_copies(vert_of, seams, n))
             return cut, loop, uv, seams, info
     P = paired_polygon(kt, lt, pair.ravel())
     uv = _harmonic(Lc, loop, P, cache)
@@ -1417,7 +1426,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         repaired += 1
     info['repair_rounds'] = repaired
     info['folded_raw'] = np.nonzero(signed_uv_areas(uv, Fc) <= 0)[0]
-    info['untangled'] = untangle(Fc, uv, loop)
+    info['untangled'] = untangle(Fc, uv, _seam_copies(vert_of, seams, n))
     return cut, loop, uv, seams, info
 
 
