@@ -552,3 +552,16 @@ def test_one_click_reaches_its_target_on_cheburashka(tmp_path):
     assert rep['flips'] == 0 and rep['overlaps'] == 0 and rep['degenerate'] == 0
     assert rep['mu_ratio_p1_p99_area'] >= 0.5
     assert rep['cones'] <= 48 and not rep['warnings']
+
+
+def test_planar_disk_takes_no_cone():
+    """A planar disk (woody, alligator) is its own conformal map: with a cone budget it gets no cone
+    and no seam, and its layout is an isometry (no placement is run for it)."""
+    from core.io.obj import read_obj
+    import os
+    m = read_obj(os.path.join(os.path.dirname(__file__), 'data', 'woody.obj'))
+    F, _ = m.triangles()
+    r = cone_unwrap(m.V, F, cones=None, target_ratio=None, max_cones=12)
+    assert r.report['cones'] == 0 and len(r.seams) == 0 and r.report['flips'] == 0
+    assert r.report['mu_ratio'] > 1 - 1e-9 and r.report['qc_mean'] < 1 + 1e-9
+    assert r.report['placement'] == []

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linprog
 
+from ..disk.flatten import planar_map
 from ..errors import ConformalError
 from ..mesh import topology
 from ..mesh.geometry import angle_sums, face_areas, face_means
@@ -1780,7 +1781,10 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
     genus = (2 - system.chi - len(system.loops)) // 2
     t = time.perf_counter()
     history = []
-    if cones is None:
+    if cones is None and system.loops and planar_map(Vw, Fw) is not None:
+        # a planar disk is its own conformal map (u = 0, an isometry): no cone can gain
+        S, kappa = np.zeros(0, np.int64), np.zeros(0)
+    elif cones is None:
         S, kappa, history = place_cones(system, target_ratio, int(max_cones), sweeps if n <= BIG_MESH else 0,
                                         progress=lambda f, msg: report_progress(0.05 + 0.6 * f, msg))
         if n <= BIG_MESH:
