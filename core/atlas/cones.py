@@ -1143,6 +1143,13 @@ def _harmonic(L, loop, PB, cache=None):
     return X
 
 
+def _folded(uv, F):
+    """(m,) bool: the triangles ``F`` (m,3) that the layout ``uv`` (N,2) turns over or flattens (signed
+    area at most 1e-14 of the total absolute area)."""
+    area = signed_uv_areas(uv, F)
+    return area <= 1e-14 * np.abs(area).sum()
+
+
 def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS, Vc=None):
     """Local repair of an exact layout ``uv`` (N,2), in place: the input triangles are laid out with
     straight edges between the vertices of the intrinsic triangulation, so a needle triangle can come
@@ -1172,11 +1179,7 @@ def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS, Vc=None):
     else:
         Lp = clamped_laplacian(Lc, np.ones(N, bool)).tocsr()
 
-    def folded(x):
-        area = signed_uv_areas(x, Fc)
-        return area <= 1e-14 * np.abs(area).sum()
-
-    bad = folded(uv)
+    bad = _folded(uv, Fc)
     best = (int(bad.sum()), uv.copy())
     for r in range(rounds):
         if not bad.any():
@@ -1196,7 +1199,7 @@ def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS, Vc=None):
             uv[M] = Factor(Lp[M][:, M].tocsc()).solve(-(Lp[M][:, R] @ uv[R]))
         except (ConformalError, RuntimeError, ValueError):
             break
-        bad = folded(uv)
+        bad = _folded(uv, Fc)
         if bad.sum() < best[0]:
             best = (int(bad.sum()), uv.copy())
     uv[:] = best[1]
@@ -1215,12 +1218,7 @@ def untangle(Fc, uv, pinned, rounds=UNTANGLE_ROUNDS, margin=UNTANGLE_MARGIN):
     folded triangles only (a handful). Returns the number of vertices moved."""
     moved = 0
     fixed = np.asarray(pinned, bool)
-
-    def folded():
-        area = signed_uv_areas(uv, Fc)
-        return area <= 1e-14 * np.abs(area).sum()
-
-    bad = folded()
+    bad = _folded(uv, Fc)
     for _ in range(rounds):
         verts = np.unique(Fc[bad])
         verts = verts[~fixed[verts]]
@@ -1259,19 +1257,21 @@ def untangle(Fc, uv, pinned, rounds=UNTANGLE_ROUNDS, margin=UNTANGLE_MARGIN):
             if res.status == 0:
                 uv[v] = p0 + size * res.x[:2]
                 moved += 1
-        bad = folded()
+        bad = _folded(uv, Fc)
         if not bad.any():
             break
     return moved
 
 
-def _seam_copies(vert_of, seams, n):
-    """(N,) bool: the split vertices of a cut disk (``vert_of`` (N,) their mesh vertices, of ``n``)
-    that are copies of a vertex on the cut ``seams`` (k,2); a vertex only on the mesh's own boundary
-    is not one."""
+def _untangle_layout(Fc, uv, vert_of, seams, n, info):
+    """``untangle`` the cut disk's layout ``uv`` (N,2) in place, with the copies of vertices on the cut
+    ``seams`` (k,2) pinned (``vert_of`` (N,) their mesh vertices, of ``n``; a vertex only on the mesh's
+    own boundary may move). Records in ``info``: ``folded_raw``, the triangles of ``Fc`` folded before
+    (for ``softened``), and ``untangled``, the number of vertices moved."""
     on = np.zeros(n, bool)
     on[np.asarray(seams, np.int64).ravel()] = True
-    return on[vert_of]
+    info['folded_raw'] = np.nonzero(signed_uv_areas(uv, Fc) <= 0)[0]
+    info['untangled'] = untangle(Fc, uv, on[vert_of])
 
 
 def _wedge_middle(Vc, Fc, loop, corner):
@@ -1407,8 +1407,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
             info['flat_triangles'] = got[2]
             info['u_exact'] = got[0]
             info['repair_rounds'] = _relax_folds(Fc, loop, uv, Lc, Vc=Vc)
-            info['folded_raw'] = np.nonzero(signed_uv_areas(uv, Fc) <= 0)[0]
-            info['untangled'] = untangle(Fc, uv, _seam_copies(vert_of, seams, n))
+            _untangle_layout(Fc, uv, vert_of, seams, n, info)
             return cut, loop, uv, seams, info
     P = paired_polygon(kt, lt, pair.ravel())
     uv = _harmonic(Lc, loop, P, cache)
@@ -1426,8 +1425,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
         uv = _harmonic(clamped_laplacian(Lc, mark), loop, P)
         repaired += 1
     info['repair_rounds'] = repaired
-    info['folded_raw'] = np.nonzero(signed_uv_areas(uv, Fc) <= 0)[0]
-    info['untangled'] = untangle(Fc, uv, _seam_copies(vert_of, seams, n))
+    _untangle_layout(Fc, uv, vert_of, seams, n, info)
     return cut, loop, uv, seams, info
 
 
