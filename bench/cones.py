@@ -179,12 +179,10 @@ def corpus_rows(names, budgets, auto=True, n=65):
     """The Pareto rows of every other mesh (disks, holes, several parts, messy input) and of the
     generated surfaces at ``n`` (disks), through ``core.unwrap(V, F, cones=N)`` (a budget per part;
     'auto': target 0.5), as a user's one call does: the core repairs and splits the input itself.
-    Measured per triangle on the per-corner output (``uv_corner``), at true scale, over every
-    flattened triangle: mu_ratio, area-weighted p1/p99, qc_mean, flips (against each island's own
-    orientation), the report's overlaps, and the chosen seams' length over all edges."""
+    The result's own per-triangle measures (``report``, ``mu``: zero-area triangles left out):
+    mu_ratio, area-weighted p1/p99, qc_mean, flips, overlaps, and the seams' length over all edges."""
     from core import make_surface, unwrap
-    from core.mesh.measures import jacobians, measures_from_jacobians
-    from core.mesh.validate import degenerate_faces
+    from core.mesh.geometry import face_areas
     print('| mesh | triangles | cones | islands | seam | mu_ratio | p1/p99 (area) | qc_mean | flips '
           '| overlaps | s | warnings |')
     print('|---|---|---|---|---|---|---|---|---|---|---|---|')
@@ -198,8 +196,6 @@ def corpus_rows(names, budgets, auto=True, n=65):
                 continue
             V, F = got
             label = name
-        E, _ = topology.unique_edges(F)
-        total = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).sum()
         for N in list(budgets) + (['auto'] if auto else []):
             t = time.perf_counter()
             try:
@@ -208,22 +204,12 @@ def corpus_rows(names, budgets, auto=True, n=65):
                 print(f"| {label} | {len(F)} | {N} | error: {exc} |", flush=True)
                 continue
             dt = time.perf_counter() - t
-            ok = res.flattened & ~degenerate_faces(V, F)       # zero-area triangles have no Jacobian
-            Fk = F[ok]
-            Vc = V[Fk].reshape(-1, 3)
-            Fc = np.arange(3 * len(Fk)).reshape(-1, 3)
-            J, A = jacobians(Vc, Fc, res.uv_corner[ok].reshape(-1, 2))
-            me, mu = measures_from_jacobians(J, A)
-            det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
-            isl = res.face_island[ok]
-            major = np.sign(np.bincount(isl, np.sign(det)))
-            flips = int((np.sign(det) != major[isl]).sum())
-            S = np.asarray(res.seams).reshape(-1, 2)
-            seam = np.linalg.norm(V[S[:, 0]] - V[S[:, 1]], axis=1).sum() / total if len(S) else 0.0
             r = res.report
-            print(f"| {label} | {len(F)} | {N}: {len(res.cones)} | {r.get('islands', len(res.islands))} | "
-                  f"{seam:.4f} | {me['mu_ratio']:.3f} | {weighted_spread(mu, A):.3f} | {me['qc_mean']:.3f} | "
-                  f"{flips} | {r.get('overlaps', '-')} | {dt:.1f} | {len(res.warnings)} |", flush=True)
+            ok = np.isfinite(res.mu)                  # flattened, zero-area triangles left out
+            spread = weighted_spread(res.mu[ok], face_areas(V, F)[ok])
+            print(f"| {label} | {len(F)} | {N}: {len(res.cones)} | {r['islands']} | "
+                  f"{r['seam_fraction']:.4f} | {r['mu_ratio']:.3f} | {spread:.3f} | {r['qc_mean']:.3f} | "
+                  f"{r['flips']} | {r['overlaps']} | {dt:.1f} | {len(res.warnings)} |", flush=True)
 
 
 def big(extra=False):
