@@ -66,7 +66,8 @@ def summary(rows):
           '|---|---|---|---|---|---|---|---|')
     for mesh in dict.fromkeys(r['mesh'] for r in rows):
         rs = [r for r in rows if r['mesh'] == mesh]
-        o = next((r for r in rs if r['method'] in ('ours default', 'ours sphere mode')), None)
+        o = next((r for r in rs if r['method'] == 'ours default'
+                  or (r['method'].startswith('ours sphere mode') and 'default' in r['method'])), None)
         h = next((r for r in rs if r['method'].startswith('heat')), None)
         f = next((r for r in rs if r['method'].startswith('mesh FMM')), None)
         if o is None or h is None:
@@ -469,18 +470,26 @@ def run_sphere(name, V, F, rows, plot):
         rows.append(row)
         results[label] = row
 
-    out, tq = {}, []
-    for k in SETS:
-        t = time.perf_counter()
-        try:
-            d, rep = sphere_geodesic(V, F, sets[k], S=S)
-        except ConformalError as exc:
-            print(f"# {name}: sphere mode failed on the {k} source set ({exc})", flush=True)
-            return
-        tq.append(time.perf_counter() - t)
-        out[k] = d
-    evaluate('ours sphere mode', out, t_setup, float(np.mean(tq)),
-             {'grid': rep.get('grid', '-') if isinstance(rep.get('grid'), int) else '-'})
+    for method in ('auto', 'charts'):
+        out, tq, est, warn = {}, [], [], 0
+        for k in SETS:
+            t = time.perf_counter()
+            try:
+                d, rep = sphere_geodesic(V, F, sets[k], S=S, method=method)
+            except ConformalError as exc:
+                print(f"# {name}: sphere mode ({method}) failed on the {k} source set ({exc})", flush=True)
+                break
+            tq.append(time.perf_counter() - t)
+            out[k] = d
+            if rep.get('error_estimate') is not None:
+                est.append(rep['error_estimate'])
+            warn += len(rep['warnings'])
+        else:
+            extra = {'warnings': warn}
+            if est:
+                extra['estimate'] = float(np.mean(est))
+            evaluate(f"ours sphere mode ({rep['method']}{', default' if method == 'auto' else ''})", out,
+                     t_setup, float(np.mean(tq)), extra)
     for aname, d, setup, tq in anchor_runs(V, F, sets):
         evaluate(aname, d, setup, tq)
     print(f"# {name} (sphere mode): done; exact MMP {t_exact:.2f} s per set", flush=True)

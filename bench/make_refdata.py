@@ -3,11 +3,14 @@ a dev-only dependency: requirements-dev.txt).
 
     .venv/bin/python bench/make_refdata.py            # writes tests/data/geodesic_ref_*.npz
     .venv/bin/python bench/make_refdata.py --check    # only the flat-square sanity check
+    .venv/bin/python bench/make_refdata.py --closed   # only the closed meshes' files
 
 Each file ``geodesic_ref_<surface>_<n>.npz`` holds ``sources`` (k,) int32 vertex indices and
 ``dist`` (k, n*n) float32 exact distances from each source to every vertex of
 ``core.surfaces.make_surface(surface, n)``. The generator first checks pygeodesic on a flat square,
-where the exact answer is the Euclidean distance."""
+where the exact answer is the Euclidean distance. ``geodesic_ref_<name>_closed.npz`` holds the same for
+the closed meshes ``tests/data/sphere_<name>.npz`` (vertices as float64 of the stored float32), for
+sphere mode's tests."""
 import argparse
 import os
 import sys
@@ -28,6 +31,12 @@ REFS = (
     ('bump', 129, (0, 8320, 64)),
     ('bump', 65, (0, 2112, 32)),
     ('edgebump', 65, (0, 2112, 32, 2138)),     # 2138: the peak, the vertex of largest angle defect
+)
+
+# closed meshes (tests/data/sphere_<name>.npz) and sources: three vertices spread through the index order
+CLOSED = (
+    ('spot', (0, 976, 1953)),
+    ('cheburashka', (0, 2223, 4446)),
 )
 
 
@@ -58,9 +67,20 @@ def check_flat():
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--check', action='store_true', help='only run the flat-square check')
+    ap.add_argument('--closed', action='store_true', help="only the closed meshes' files")
     args = ap.parse_args(argv)
     check_flat()
     if args.check:
+        return 0
+    for name, sources in CLOSED:
+        d = np.load(os.path.join(DATA, f'sphere_{name}.npz'))
+        V, F = d['V'].astype(np.float64), d['F'].astype(np.int64)
+        D = exact_distances(V, F, sources)
+        path = os.path.join(DATA, f'geodesic_ref_{name}_closed.npz')
+        np.savez_compressed(path, sources=np.array(sources, np.int32), dist=D.astype(np.float32))
+        print(f"{name} (closed) sources {sources}: max distance {D.max():.4f} -> "
+              f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
+    if args.closed:
         return 0
     for name, n, sources in REFS:
         V, F = make_surface(name, n)

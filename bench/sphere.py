@@ -116,7 +116,9 @@ def row(name, V, F):
 
 def geodesic_tables(quick):
     """Geodesic distances through the sphere: the icosphere against great circles, and closed meshes
-    against exact polyhedral distances (pygeodesic, a dev dependency) for three Moebius choices."""
+    against exact polyhedral distances (pygeodesic, a dev dependency) for three Moebius choices. The
+    charts' march itself (``method='charts'``): the default switches to surface paths where the charts
+    do not resolve the surface (bench/geodesic_real.py --sphere compares the two)."""
     from core.sphere.geodesic import sphere_geodesic, default_sphere_grid
     print('\n## geodesic distances through the sphere (two stereographic charts, fast marching)\n')
     print('| mesh | map | source | grid | mean rel. error | max rel. error | buckets | seconds |')
@@ -124,7 +126,7 @@ def geodesic_tables(quick):
     V, F = icosphere(16)
     for s in (0, 100, int(np.argmin(V[:, 2]))):
         t = time.perf_counter()
-        d, rep = sphere_geodesic(V, F, [s], S=V)
+        d, rep = sphere_geodesic(V, F, [s], S=V, method='charts')
         sec = time.perf_counter() - t
         gc = np.arccos(np.clip(V @ V[s], -1, 1))
         m = gc > 0.05
@@ -145,7 +147,7 @@ def geodesic_tables(quick):
             S = sphere_map(V, F, moebius=mode).S
             for g in ((g0, 2 * g0) if not quick else (g0,)):
                 t = time.perf_counter()
-                d, rep = sphere_geodesic(V, F, [s], S=S, grid=g)
+                d, rep = sphere_geodesic(V, F, [s], S=S, grid=g, method='charts')
                 sec = time.perf_counter() - t
                 e = np.abs(d[m] - ref[m]) / ref[m]
                 print(f"| {name} (exact MMP) | {mode} | {s} | {rep['grid'][0]} | {100 * e.mean():.2f}% | "

@@ -256,7 +256,8 @@ def test_geodesic_warns_where_the_sphere_map_shrinks_the_surface():
     r2 = np.abs(w) ** 2
     S = np.c_[2 * w.real / (1 + r2), 2 * w.imag / (1 + r2), (1 - r2) / (1 + r2)]
     S[pole] = [0.0, 0.0, -1.0]
-    d, rep = sphere_geodesic(V, F, [s], S=S, grid=128)
+    d, rep = sphere_geodesic(V, F, [s], S=S, grid=128, method='charts')
+    assert rep['method'] == 'charts'
     assert rep['unresolved_fraction'] > 0.1 and rep['clamped']['below_euclid'] > 0
     assert any('do not resolve' in m for m in rep['warnings']), rep['warnings']
     E = np.linalg.norm(V - V[s], axis=1)
@@ -266,6 +267,88 @@ def test_geodesic_warns_where_the_sphere_map_shrinks_the_surface():
                       shape=(len(V), len(V))).tocsr()
     up = dijkstra(G, indices=s)
     assert (d >= E - 1e-12).all() and (d <= up * (1 + 1e-12)).all()
+
+
+def _squeezed_icosphere(K=8.0):
+    """icosphere(10) and a Moebius map of it (stereographic projection scaled by ``K``): conformal,
+    fold-free, half the sphere squeezed ``K`` times."""
+    V, F = icosphere(10)
+    pole = V[:, 2] < -1 + 1e-12
+    with np.errstate(divide='ignore', invalid='ignore'):
+        w = (V[:, 0] + 1j * V[:, 1]) / (1.0 + V[:, 2]) * K
+    r2 = np.abs(w) ** 2
+    S = np.c_[2 * w.real / (1 + r2), 2 * w.imag / (1 + r2), (1 - r2) / (1 + r2)]
+    S[pole] = [0.0, 0.0, -1.0]
+    return V, F, S
+
+
+def test_geodesic_takes_surface_paths_where_the_charts_do_not_resolve():
+    """Where the charts cannot resolve the surface (the squeezed map on a coarse grid), the default
+    method answers by shortest surface paths: no warning, an error estimate, distances within the
+    exact bounds and close to the great circles (the polyhedron's own distances are 0.1-0.2 % shorter),
+    nine times closer than the charts' march."""
+    from core.sphere.geodesic import sphere_geodesic
+    V, F, S = _squeezed_icosphere()
+    s = 5
+    gc = _great_circle(V, s)
+    m = gc > 0.05
+    d, rep = sphere_geodesic(V, F, [s], S=S, grid=128)
+    dc, repc = sphere_geodesic(V, F, [s], S=S, grid=128, method='charts')
+    err, errc = (np.abs(x[m] - gc[m]) / gc[m] for x in (d, dc))
+    assert rep['method'] == 'paths' and repc['method'] == 'charts'
+    assert rep['warnings'] == [] and 0 < rep['error_estimate'] < 1e-3 and rep['steiner_points'] >= 7
+    assert err.mean() < 0.003 and err.max() < 0.01, (err.mean(), err.max())
+    assert errc.mean() > 5 * err.mean(), (errc.mean(), err.mean())
+    assert (d <= gc * (1 + 1e-9)).all()                  # inscribed polyhedron: never above the sphere's
+    assert (d >= np.linalg.norm(V - V[s], axis=1) - 1e-12).all()
+
+
+@pytest.mark.parametrize('name', ['spot', 'cheburashka'])
+def test_geodesic_sphere_mode_on_scans_against_exact(name):
+    """Issue #14's sphere-mode line: on spot (sphere map mu ratio 0.01) and cheburashka (3 folded
+    triangles), against exact MMP (tests/data/geodesic_ref_<name>_closed.npz), excluding 2 % of the
+    diagonal around the sources: mean below 0.1 % (the heat method's is 1.6-2.3 %), max below 2 %, for
+    each source and for the three together; the error estimate within a factor 2.5 of the measured
+    mean; and the same distances for any vertex order (a permutation of V and of F)."""
+    from core.sphere.geodesic import sphere_geodesic
+    V, F = _load(name)
+    ref = np.load(os.path.join(DATA, f'geodesic_ref_{name}_closed.npz'))
+    src, D = ref['sources'].astype(np.int64), ref['dist'].astype(np.float64)
+    S = sphere_map(V, F).S
+    diag = np.linalg.norm(np.ptp(V, axis=0))
+    sets = [[int(x)] for x in src] + [list(map(int, src))]
+    refs = list(D) + [D.min(0)]
+    for ss, Dk in zip(sets, refs):
+        d, rep = sphere_geodesic(V, F, ss, S=S)
+        far = np.min(np.linalg.norm(V[:, None] - V[ss][None], axis=2), axis=1) > 0.02 * diag
+        e = np.abs(d[far] - Dk[far]) / Dk[far]
+        assert rep['method'] == 'paths', rep['method']
+        assert e.mean() < 1e-3 and e.max() < 0.02, (ss, e.mean(), e.max())
+        assert e.mean() / 2.5 < rep['error_estimate'] < 2.5 * e.mean(), (rep['error_estimate'], e.mean())
+    perm = np.random.default_rng(3).permutation(len(V))
+    inv = np.argsort(perm)
+    Fp = inv[F][np.random.default_rng(4).permutation(len(F))]
+    dp, _ = sphere_geodesic(V[perm], Fp, [int(inv[src[0]])], S=S[perm])
+    d0, _ = sphere_geodesic(V, F, [int(src[0])], S=S)
+    assert np.allclose(dp[inv], d0, rtol=1e-9, atol=1e-12)
+
+
+def test_surface_paths_sources_scale_and_budget():
+    """Several sources give the pointwise minimum of their graph distances (exactly, before the
+    extrapolation); distances scale with the mesh and ignore a rigid motion; the Steiner points per
+    edge fall as the mesh grows and none fit beyond the budget."""
+    from core.geodesic import paths
+    V, F = icosphere(6)
+    a = paths.steiner_distances(V, F, src=3, k=5)[0]
+    b = paths.steiner_distances(V, F, src=200, k=5)[0]
+    ab = paths.steiner_distances(V, F, src=[3, 200], k=5)[0]
+    assert np.array_equal(ab, np.minimum(a, b))
+    d, est = paths.surface_paths(V, F, [3, 200], 7)
+    Q, _ = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))
+    d2, est2 = paths.surface_paths(2.5 * V @ Q.T + 1.0, F, [200, 3], 7)
+    assert np.allclose(d2, 2.5 * d, rtol=1e-9) and est2 == pytest.approx(est, rel=1e-6)
+    ks = [paths.path_points(m, 3 * m // 2) for m in (1_000, 40_000, 60_000, 80_000, 200_000)]
+    assert ks == [9, 7, 5, 5, None], ks
 
 
 def test_geodesic_bad_sources():

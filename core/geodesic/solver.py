@@ -52,6 +52,7 @@ import numpy as np
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
+from .paths import STEINER, steiner_distances
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
 MU_MODES = ('metric', 'vertex', 'face')
@@ -222,88 +223,6 @@ class MeshRelax:
             if not changed.any():
                 return it
         return max_iter
-
-
-STEINER_ORDER = 1.85  # the Steiner paths' excess falls as k^-1.85 (measured on spot: k = 4, 10, 16, 30)
-STEINER = 15         # Steiner points per edge in the refined seed's shortest paths (``steiner_distances``)
-
-
-def _steiner_graph(V, F, src=None, X=None, src_faces=None, k=STEINER):
-    """Shortest paths on the surface of the triangles ``F`` (m,3) (vertices ``V`` (n,3)) from a source
-    vertex ``src`` or a point ``X`` (3,) in the triangles ``src_faces``, through ``k`` Steiner points on
-    every edge: a graph joining every pair of points (vertices and Steiner points) on the boundary of
-    each triangle by the straight segment inside it. Each graph path is a path on the surface, so the
-    distances are upper bounds of the geodesic ones, and tend to them as ``k`` grows (docs/geodesic.md,
-    "Refined seed"). Returns ``(dv (n,) at the vertices, inf off F; dS (p,) at every graph point; P
-    (p,3) the points; own (m, 3 + 3k) the points on each triangle's boundary)``."""
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import dijkstra
-    n, m = len(V), len(F)
-    Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
-    ue, inv = np.unique(Ed, axis=0, return_inverse=True)
-    inv = inv.reshape(3, m).T                                            # (m,3) edge of each side
-    t = np.arange(1, k + 1) / (k + 1)
-    P = V[ue[:, 0]][:, None] * (1 - t)[None, :, None] + V[ue[:, 1]][:, None] * t[None, :, None]
-    pts = np.concatenate([V, P.reshape(-1, 3)])
-    pid = n + np.arange(len(ue) * k).reshape(len(ue), k)
-    own = np.concatenate([F, pid[inv].reshape(m, 3 * k)], 1)              # (m, 3 + 3k)
-    # segments inside each triangle between points on two different sides (each such pair belongs to
-    # one triangle only), plus the chain of consecutive points along every edge (once per edge): no
-    # pair appears twice, and the memory is (m (3k+3)^2 / 2) index pairs at most
-    side = np.r_[[0b101, 0b011, 0b110], np.repeat([0b001, 0b010, 0b100], k)]      # sides of each slot
-    ia, ib = np.triu_indices(own.shape[1], 1)
-    cross = (side[ia] & side[ib]) == 0
-    ia, ib = ia[cross], ib[cross]
-    chain = np.concatenate([ue[:, :1], pid, ue[:, 1:]], 1)                         # (e, k+2)
-    a = np.r_[own[:, ia].ravel(), chain[:, :-1].ravel()]
-    b = np.r_[own[:, ib].ravel(), chain[:, 1:].ravel()]
-    N = len(pts)
-    w = np.maximum(np.linalg.norm(pts[a] - pts[b], axis=1), 1e-300)
-    if src is not None:
-        G = sp.coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(N, N)).tocsr()
-        dS = dijkstra(G, directed=True, indices=int(src))
-    else:
-        cand = np.unique(own[np.asarray(src_faces)].ravel())
-        wx = np.maximum(np.linalg.norm(pts[cand] - X, axis=1), 1e-300)
-        G = sp.coo_matrix((np.r_[w, w, wx], (np.r_[a, b, np.full(len(cand), N)], np.r_[b, a, cand])),
-                          shape=(N + 1, N + 1)).tocsr()
-        dS = dijkstra(G, directed=True, indices=N)[:N]
-    return dS, pts, own, ue, pid
-
-
-def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapolate=False):
-    """Shortest paths on the surface of the triangles ``F`` (m,3) (vertices ``V`` (n,3)) from a source
-    vertex ``src`` or a point ``X`` (3,) in the triangles ``src_faces``, through ``k`` Steiner points on
-    every edge: a graph joining every pair of points (vertices and Steiner points) on the boundary of
-    each triangle by the straight segment inside it. Each graph path is a path on the surface, so the
-    distances are upper bounds of the geodesic ones, and tend to them as ``k`` grows (docs/geodesic.md,
-    "Refined seed"). ``extrapolate`` (``k`` odd): also the graph of ``(k - 1) / 2`` points per edge (its
-    points are every second one of the first), and the excess ``d_k - d`` taken as ``(d_(k-1)/2 - d_k) /
-    (2^STEINER_ORDER - 1)`` at the shared points, linearly interpolated along the edge between them
-    (Richardson's extrapolation: no longer an upper bound, about 8x closer on spot, bunny, edgebump).
-    Returns ``(dv (n,) at the vertices, inf off F; dS (p,) at every graph point; P (p,3) the points;
-    own (m, 3 + 3k) the points on each triangle's boundary)``."""
-    n = len(V)
-    dS, pts, own, ue, pid = _steiner_graph(V, F, src, X, src_faces, k)
-    if extrapolate and k >= 3 and k % 2 == 1:
-        j = (k - 1) // 2
-        dC, _, _, ueC, pidC = _steiner_graph(V, F, src, X, src_faces, j)
-        # the coarse graph's points: the vertices and fine points 1, 3, ... (0-based) of every edge, in the
-        # same edge order (both from np.unique of the same sorted edges)
-        fine_at = np.full(len(dC), -1, np.int64)
-        fine_at[:n] = np.arange(n)
-        fine_at[pidC.ravel()] = pid[:, 1::2].ravel()
-        ok = np.isfinite(dC) & np.isfinite(dS[fine_at])
-        corr = np.zeros(len(dS))
-        corr[fine_at[ok]] = (dC[ok] - dS[fine_at[ok]]) / (2.0 ** STEINER_ORDER - 1.0)
-        # fine points 0, 2, ..., k-1 of each edge: the mean of their two neighbours (vertex or shared point)
-        chain = np.concatenate([ue[:, :1], pid, ue[:, 1:]], 1)                     # (e, k+2)
-        corr[chain[:, 1:-1:2]] = 0.5 * (corr[chain[:, 0:-2:2]] + corr[chain[:, 2::2]])
-        dS = dS - np.maximum(corr, 0.0)
-    dv = np.full(n, np.inf)
-    used = np.unique(F)
-    dv[used] = dS[used]
-    return dv, dS, pts, own
 
 
 # --------------------------------------------------------------------------------------------------

@@ -7,6 +7,9 @@ import numpy as np
 
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
+from ..geodesic.paths import PATH_K, path_points, surface_paths
+from ..geodesic.solver import ERROR_TARGET
+from ..mesh.topology import unique_edges
 from .map import sphere_map
 
 # --- geodesic distances through the sphere ----------------------------------------------------------
@@ -19,6 +22,8 @@ from .map import sphere_map
 # path segment lies in one chart; both charts march from the contour T = tau, the results are
 # exchanged through the overlap (bilinear sampling), and the nodes up to tau + W are final.
 GEO_OVERLAP_DEG = 25.0
+GEO_METHODS = ('auto', 'charts', 'paths')
+UNRESOLVED_MAX = 0.01    # 'auto' takes the surface paths above this unresolved area fraction
 
 
 class _Chart:
@@ -115,61 +120,31 @@ def _march(phi, chart, solver, T0=None, narrow=0.0):
     return march(T0, phi < 0, phi, chart.speed, mask, chart.h, solver)
 
 
-def default_sphere_grid(n_vertices):
-    """Nodes per side of each chart's grid: about 4 per sqrt(vertex), rounded up to a multiple of 64,
-    clipped to 256..768."""
-    return int(np.clip(64 * np.ceil(4.0 * np.sqrt(n_vertices) / 64), 256, 768))
+def _unresolved_fraction(V, F, S, charts):
+    """The area fraction of the mesh (V (n,3), F (m,3)) that the ``charts`` do not resolve: a triangle
+    whose surface cell (the chart's cell over its speed there, in the chart where its centroid is more
+    interior) is above twice its mean edge (docs/geodesic.md, "Sphere mode")."""
+    cen = S[F].mean(1)
+    cen /= np.linalg.norm(cen, axis=1)[:, None]
+    edge = np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean(1)
+    cell = np.empty(len(F))
+    ok = np.isfinite(cen).all(1)
+    cell[~ok] = np.nan
+    for c, sel in zip(charts, (ok & (cen[:, 2] >= 0), ok & (cen[:, 2] < 0))):
+        sp_c = c.sample(c.speed, c.coords_of(cen[sel]))
+        cell[sel] = c.h / np.where(np.isfinite(sp_c) & (sp_c > 0), sp_c, np.nan)
+    A = face_areas(V, F)
+    bad_f = ~(cell <= 2.0 * edge)
+    unresolved = float(A[bad_f].sum() / A.sum())
+    return unresolved
 
 
-def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver='auto',
-                    overlap=GEO_OVERLAP_DEG, source_radius=8.0, progress=None):
-    """Geodesic distances on a closed genus-0 mesh by fast marching through its conformal sphere.
-
-    V (n,3), F (m,3); ``sources`` vertex indices (k,) (the result is the distance to the nearest).
-    ``S`` (n,3): a sphere map to reuse (from ``sphere_map``); None computes one with ``moebius``.
-    ``grid``: nodes per side of each chart (None: ``default_sphere_grid``). ``solver``: as
-    ``core.geodesic.solver.eikonal_march`` ('auto', 'skfmm', 'sweep'). ``overlap``: half-width of the
-    band the two
-    charts share, in degrees of latitude. ``source_radius``: exact seed disk radius, in cells.
-    Every distance is clamped between the 3D distance to the nearest source and the shortest edge path
-    (``report['clamped']`` counts them). Returns ``(dist (n,) float64 in mesh units, report dict)``; the
-    report's ``warnings`` (list of str) name a folded sphere map, an area fraction above 1 % that the
-    charts do not resolve (``unresolved_fraction``: surface cell above twice the triangle's mean edge),
-    and more than 1 % of the vertices clamped."""
+def _march_charts(charts, S, src, logmu_v, R, solver, source_radius, flips):
+    """Distances (n,) at the vertices by fast marching on the two ``charts`` in buckets of time (the
+    module's comment), from the source vertices ``src`` (s,) at sphere points ``S[src]``; ``logmu_v``
+    (n,) the per-vertex log sphere scale, ``R`` the charts' radius, ``flips`` the sphere map's folds
+    (named in the error if the front stops). Returns ``(dist, solver used, buckets, bucket width)``."""
     from ..geodesic.solver import calibrate_phi
-    from ..mesh.measures import vertex_mu
-    say = progress or (lambda f, msg: None)
-    t0 = time.perf_counter()
-    V = np.asarray(V, np.float64)
-    F = np.asarray(F, np.int64)
-    n = len(V)
-    src = np.atleast_1d(np.asarray(sources))
-    if src.size == 0:
-        raise ConformalError("no source given: pass at least one source vertex")
-    if not np.issubdtype(src.dtype, np.integer) or src.min() < 0 or src.max() >= n:
-        raise ConformalError(f"source vertices must be indices in 0..{n - 1}")
-    if not 5.0 <= overlap <= 60.0:
-        raise ConformalError("overlap must be between 5 and 60 degrees")
-    report = {}
-    if S is None:
-        say(0.0, 'mapping to the sphere')
-        res = sphere_map(V, F, moebius=moebius)
-        S = res.S
-        report['sphere'] = {k: res.report[k] for k in ('moebius', 'mu_ratio', 'qc_mean', 'flips')}
-    S = np.asarray(S, np.float64)
-    S = S / np.linalg.norm(S, axis=1)[:, None]
-    if S.shape != V.shape:
-        raise ConformalError(f"S must have shape {V.shape}, got {S.shape}")
-    if grid is None:
-        grid = default_sphere_grid(n)
-    # sphere length per surface length, per triangle (unnormalised) and per vertex
-    P = S[F]
-    a_s = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
-    mu_f = np.sqrt(np.maximum(a_s, np.finfo(float).tiny) / face_areas(V, F))
-    logmu_v = np.log(vertex_mu(F, mu_f, face_areas(V, F), n))
-    R = float(np.tan(np.radians(45.0 + 0.5 * overlap)))
-    say(0.2, 'rasterising the charts')
-    charts = [_Chart('N', S, F, logmu_v, R, grid), _Chart('S', S, F, logmu_v, R, grid)]
     other = [charts[1], charts[0]]
     # node positions of each chart in the other chart's coordinates (the band only)
     for c, o in zip(charts, other):
@@ -203,8 +178,6 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
             Tc = np.full(c.G.shape, np.inf)
         T.append(Tc)
     # nodes of the seed windows beyond tau keep their exact local times: they place the contour
-    say(0.3, 'marching')
-    t = time.perf_counter()
     used = None
     buckets = 0
     while True:
@@ -240,15 +213,12 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
         lo = min(float(np.min(np.where(c.valid & (T[k] > tau - W), T[k], np.inf)))
                  for k, c in enumerate(charts))
         if not np.isfinite(lo):
-            flips = int((report.get('sphere') or {}).get('flips') or 0)
             why = (f" (the sphere map folds {flips} triangles: cut the mesh along seams and use the planar "
                    "solver)" if flips else "")
             raise ConformalError("the fast marching front stopped before covering the sphere: "
                                  "increase the grid size" + why)
-    seconds_march = time.perf_counter() - t
     # sample at the vertices from the chart where each is more interior
-    say(0.9, 'sampling')
-    dist = np.empty(n)
+    dist = np.empty(len(S))
     north = S[:, 2] >= 0
     for c, sel in zip(charts, (north, ~north)):
         dist[sel] = c.sample(T[charts.index(c)], c.coords_of(S[sel]))
@@ -272,6 +242,97 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
             sp_s = np.exp(logmu_v[s_here[j[close]]]) * 0.5 * (1 + np.abs(ws[j[close]]) ** 2)
             local = d[close] * 0.5 * (1.0 / sp_v + 1.0 / sp_s)
             dist[idx] = np.fmin(dist[idx], local)
+    return dist, used, buckets, W
+
+
+def default_sphere_grid(n_vertices):
+    """Nodes per side of each chart's grid: about 4 per sqrt(vertex), rounded up to a multiple of 64,
+    clipped to 256..768."""
+    return int(np.clip(64 * np.ceil(4.0 * np.sqrt(n_vertices) / 64), 256, 768))
+
+
+def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver='auto',
+                    overlap=GEO_OVERLAP_DEG, source_radius=8.0, progress=None, method='auto'):
+    """Geodesic distances on a closed genus-0 mesh by fast marching through its conformal sphere, and
+    by shortest surface paths where the sphere's charts cannot resolve the surface.
+
+    V (n,3), F (m,3); ``sources`` vertex indices (k,) (the result is the distance to the nearest).
+    ``S`` (n,3): a sphere map to reuse (from ``sphere_map``); None computes one with ``moebius``.
+    ``grid``: nodes per side of each chart (None: ``default_sphere_grid``). ``solver``: as
+    ``core.geodesic.solver.eikonal_march`` ('auto', 'skfmm', 'sweep'). ``overlap``: half-width of the
+    band the two
+    charts share, in degrees of latitude. ``source_radius``: exact seed disk radius, in cells.
+    Every distance is clamped between the 3D distance to the nearest source and the shortest edge path
+    (``report['clamped']`` counts them). Returns ``(dist (n,) float64 in mesh units, report dict)``; the
+    report's ``warnings`` (list of str) name a folded sphere map, an area fraction above 1 % that the
+    charts do not resolve (``unresolved_fraction``: surface cell above twice the triangle's mean edge),
+    and more than 1 % of the vertices clamped.
+
+    ``method``: 'charts' marches on the two charts; 'paths' takes shortest paths on the mesh through
+    Steiner points, Richardson-extrapolated (``core.geodesic.paths.surface_paths``); 'auto' (default)
+    marches where the charts resolve the surface and takes the paths where they do not (the sphere
+    map folds a triangle, or more than ``UNRESOLVED_MAX`` of the area is unresolved) and the mesh is
+    small enough for them (``path_points``). Why a switch and not a patch of the unresolved region:
+    a geodesic may cross that region and come back, so the march cannot be mended locally; and where
+    the charts fail, the map shrinks the surface 10-100x, so a finer grid costs more than the paths
+    (docs/geodesic.md, "Sphere mode"). ``report['method']`` says which ran; ``report['error_estimate']``
+    (mean relative) is the paths' excess estimate, or None after a march."""
+    from ..mesh.measures import vertex_mu
+    say = progress or (lambda f, msg: None)
+    t0 = time.perf_counter()
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    n = len(V)
+    src = np.atleast_1d(np.asarray(sources))
+    if src.size == 0:
+        raise ConformalError("no source given: pass at least one source vertex")
+    if not np.issubdtype(src.dtype, np.integer) or src.min() < 0 or src.max() >= n:
+        raise ConformalError(f"source vertices must be indices in 0..{n - 1}")
+    if method not in GEO_METHODS:
+        raise ConformalError(f"method must be one of {', '.join(GEO_METHODS)}, got {method!r}")
+    if not 5.0 <= overlap <= 60.0:
+        raise ConformalError("overlap must be between 5 and 60 degrees")
+    report = {}
+    if S is None:
+        say(0.0, 'mapping to the sphere')
+        res = sphere_map(V, F, moebius=moebius)
+        S = res.S
+        report['sphere'] = {k: res.report[k] for k in ('moebius', 'mu_ratio', 'qc_mean', 'flips')}
+    S = np.asarray(S, np.float64)
+    S = S / np.linalg.norm(S, axis=1)[:, None]
+    if S.shape != V.shape:
+        raise ConformalError(f"S must have shape {V.shape}, got {S.shape}")
+    if grid is None:
+        grid = default_sphere_grid(n)
+    # sphere length per surface length, per triangle (unnormalised) and per vertex
+    P = S[F]
+    a_s = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
+    mu_f = np.sqrt(np.maximum(a_s, np.finfo(float).tiny) / face_areas(V, F))
+    logmu_v = np.log(vertex_mu(F, mu_f, face_areas(V, F), n))
+    R = float(np.tan(np.radians(45.0 + 0.5 * overlap)))
+    say(0.2, 'rasterising the charts')
+    charts = [_Chart('N', S, F, logmu_v, R, grid), _Chart('S', S, F, logmu_v, R, grid)]
+    # how well the charts resolve the surface, and which method answers (see the docstring)
+    unresolved = _unresolved_fraction(V, F, S, charts)
+    if 'sphere' in report:
+        flips = int(report['sphere']['flips'] or 0)
+    else:
+        from .map import _count_flips
+        flips = int(_count_flips(F, S))
+    k = path_points(len(F), len(unique_edges(F)))
+    if method == 'paths' or (method == 'auto' and k is not None
+                             and (flips > 0 or unresolved > UNRESOLVED_MAX)):
+        say(0.3, 'shortest surface paths')
+        t = time.perf_counter()
+        dist, estimate = surface_paths(V, F, src, k or PATH_K[-1])
+        used, buckets, W, chosen = None, 0, None, 'paths'
+        k = k or PATH_K[-1]
+    else:
+        say(0.3, 'marching')
+        t = time.perf_counter()
+        dist, used, buckets, W = _march_charts(charts, S, src, logmu_v, R, solver, source_radius, flips)
+        estimate, chosen, k = None, 'charts', None
+    seconds_march = time.perf_counter() - t
     dist[src] = 0.0
     if not np.isfinite(dist).all():
         bad = int((~np.isfinite(dist)).sum())
@@ -289,36 +350,27 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     low, high = dist < E3, dist > upper
     clamped = {'below_euclid': int(low.sum()), 'above_edges': int(high.sum())}
     dist = np.clip(dist, E3, np.maximum(upper, E3))
-    # how well the charts resolve the surface: a triangle whose surface cell (the chart's cell over its
-    # speed there, in the chart where its centroid is more interior) is above twice its mean edge is
-    # not resolved (docs/geodesic.md, "Sphere mode")
-    cen = S[F].mean(1)
-    cen /= np.linalg.norm(cen, axis=1)[:, None]
-    edge = np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean(1)
-    cell = np.empty(len(F))
-    ok = np.isfinite(cen).all(1)
-    cell[~ok] = np.nan
-    for c, sel in zip(charts, (ok & (cen[:, 2] >= 0), ok & (cen[:, 2] < 0))):
-        sp_c = c.sample(c.speed, c.coords_of(cen[sel]))
-        cell[sel] = c.h / np.where(np.isfinite(sp_c) & (sp_c > 0), sp_c, np.nan)
-    A = face_areas(V, F)
-    bad_f = ~(cell <= 2.0 * edge)
-    unresolved = float(A[bad_f].sum() / A.sum())
     warnings = []
-    flips = int((report.get('sphere') or {}).get('flips') or 0)
-    if flips:
-        warnings.append(f"the sphere map folds {flips} triangles: distances through them are unreliable; "
-                        "cut the mesh along seams and use the planar solver")
-    if unresolved > 0.01:
-        warnings.append(f"the sphere charts do not resolve {100 * unresolved:.2g}% of the surface (grid "
-                        "cells larger than twice the triangles, where the sphere map shrinks the surface): "
-                        "expect errors of several percent there; use a larger grid, or cut the mesh along "
-                        "seams and use the planar solver")
+    if chosen == 'charts':
+        if flips:
+            warnings.append(f"the sphere map folds {flips} triangles: distances through them are unreliable; "
+                            "use method='paths', or cut the mesh along seams and use the planar solver")
+        if unresolved > UNRESOLVED_MAX:
+            warnings.append(f"the sphere charts do not resolve {100 * unresolved:.2g}% of the surface (grid "
+                            "cells larger than twice the triangles, where the sphere map shrinks the "
+                            "surface): expect errors of several percent there; use method='paths' or a "
+                            "larger grid, or cut the mesh along seams and use the planar solver")
+    elif estimate > ERROR_TARGET:
+        warnings.append(f"the surface paths' error estimate is {100 * estimate:.2g}% (target "
+                        f"{100 * ERROR_TARGET:.2g}%): the mesh is too large for more Steiner points per "
+                        "edge in the memory budget")
     nv = int(clamped['below_euclid'] + clamped['above_edges'])
     if nv > 0.01 * n:
         warnings.append(f"{nv} vertices ({100 * nv / n:.2g}%) fell outside the exact bounds (3D distance, "
                         "edge paths) and were clamped: the sphere march is inaccurate on this mesh")
-    report.update({'grid': list(charts[0].G.shape), 'cell': [c.h for c in charts], 'charts': 2,
+    report.update({'method': chosen, 'steiner_points': k, 'error_estimate': estimate,
+                   'error_target': ERROR_TARGET if chosen == 'paths' else None,
+                   'grid': list(charts[0].G.shape), 'cell': [c.h for c in charts], 'charts': 2,
                    'overlap_deg': overlap, 'buckets': buckets, 'bucket_width': W, 'solver': used,
                    'sources': int(src.size), 'clamped': clamped, 'unresolved_fraction': unresolved,
                    'warnings': warnings,
