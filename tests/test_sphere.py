@@ -347,8 +347,8 @@ def test_surface_paths_sources_scale_and_budget():
     Q, _ = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))
     d2, est2 = paths.surface_paths(2.5 * V @ Q.T + 1.0, F, [200, 3], 7)
     assert np.allclose(d2, 2.5 * d, rtol=1e-9) and est2 == pytest.approx(est, rel=1e-6)
-    ks = [paths.path_points(m, 3 * m // 2) for m in (1_000, 40_000, 60_000, 80_000, 200_000)]
-    assert ks == [9, 7, 5, 5, None], ks
+    ks = [paths.path_points(m, 3 * m // 2) for m in (1_000, 40_000, 60_000, 80_000, 200_000, 400_000)]
+    assert ks == [9, 7, 5, 5, 3, None], ks
 
 
 def test_geodesic_bad_sources():

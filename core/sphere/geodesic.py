@@ -361,9 +361,10 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
                             "surface): expect errors of several percent there; use method='paths' or a "
                             "larger grid, or cut the mesh along seams and use the planar solver")
     elif estimate > ERROR_TARGET:
+        why = ("the mesh is too large for more Steiner points per edge in the memory budget"
+               if k < PATH_K[0] else "the mesh's triangles are too irregular for its Steiner points")
         warnings.append(f"the surface paths' error estimate is {100 * estimate:.2g}% (target "
-                        f"{100 * ERROR_TARGET:.2g}%): the mesh is too large for more Steiner points per "
-                        "edge in the memory budget")
+                        f"{100 * ERROR_TARGET:.2g}%): {why}")
     nv = int(clamped['below_euclid'] + clamped['above_edges'])
     if nv > 0.01 * n:
         warnings.append(f"{nv} vertices ({100 * nv / n:.2g}%) fell outside the exact bounds (3D distance, "
