@@ -205,14 +205,14 @@ def test_geodesic_icosphere_great_circles():
     from core.sphere.geodesic import sphere_geodesic
     V, F = icosphere(10)
     for s in (0, 500, int(np.argmin(V[:, 2]))):          # on the equator, anywhere, at a pole
-        d, rep = sphere_geodesic(V, F, [s], S=V)
+        d, rep = sphere_geodesic(V, F, [s], S=V, method='charts')
         gc = _great_circle(V, s)
         m = gc > 0.05
         err = np.abs(d[m] - gc[m]) / gc[m]
         assert err.mean() < 0.003 and err.max() < 0.05, (s, err.mean(), err.max())
         assert d[s] == 0 and rep['solver'] == 'skfmm' and rep['charts'] == 2
     # two sources: the pointwise minimum
-    d2, _ = sphere_geodesic(V, F, [0, 700], S=V)
+    d2, _ = sphere_geodesic(V, F, [0, 700], S=V, method='charts')
     gc = np.minimum(_great_circle(V, 0), _great_circle(V, 700))
     m = gc > 0.05
     assert (np.abs(d2[m] - gc[m]) / gc[m]).mean() < 0.004
@@ -222,7 +222,7 @@ def test_geodesic_through_the_computed_map_in_mesh_units():
     from core.sphere.geodesic import sphere_geodesic
     V, F = icosphere(8)
     W = 3.0 * V                                          # radius 3: distances scale, the map does not care
-    d, rep = sphere_geodesic(W, F, [17])                 # maps with moebius='uniform' itself
+    d, rep = sphere_geodesic(W, F, [17], method='charts')   # maps with moebius='uniform' itself
     gc = 3.0 * _great_circle(V, 17)
     m = gc > 0.15
     assert (np.abs(d[m] - gc[m]) / gc[m]).mean() < 0.01
@@ -232,7 +232,7 @@ def test_geodesic_through_the_computed_map_in_mesh_units():
 def test_geodesic_numpy_sweep_fallback():
     from core.sphere.geodesic import sphere_geodesic
     V, F = icosphere(5)
-    d, rep = sphere_geodesic(V, F, [3], S=V, grid=96, solver='sweep')
+    d, rep = sphere_geodesic(V, F, [3], S=V, grid=96, solver='sweep', method='charts')
     gc = _great_circle(V, 3)
     m = gc > 0.1
     assert rep['solver'] == 'sweep'
@@ -248,7 +248,7 @@ def test_geodesic_warns_where_the_sphere_map_shrinks_the_surface():
     from core.sphere.geodesic import sphere_geodesic
     V, F = icosphere(10)
     s, K = 5, 8.0
-    d, rep = sphere_geodesic(V, F, [s], S=V)
+    d, rep = sphere_geodesic(V, F, [s], S=V, method='charts')
     assert rep['warnings'] == [] and rep['unresolved_fraction'] < 0.01
     pole = V[:, 2] < -1 + 1e-12
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -282,11 +282,11 @@ def _squeezed_icosphere(K=8.0):
     return V, F, S
 
 
-def test_geodesic_takes_surface_paths_where_the_charts_do_not_resolve():
-    """Where the charts cannot resolve the surface (the squeezed map on a coarse grid), the default
-    method answers by shortest surface paths: no warning, an error estimate, distances within the
-    exact bounds and close to the great circles (the polyhedron's own distances are 0.1-0.2 % shorter),
-    nine times closer than the charts' march."""
+def test_geodesic_takes_surface_paths_by_default():
+    """The default answers by shortest surface paths when the mesh fits their budget; where the charts
+    cannot resolve the surface (the squeezed map on a coarse grid) that gives no warning, an error
+    estimate, distances within the exact bounds and close to the great circles (the polyhedron's own
+    distances are 0.1-0.2 % shorter), nine times closer than the charts' march."""
     from core.sphere.geodesic import sphere_geodesic
     V, F, S = _squeezed_icosphere()
     s = 5
@@ -331,6 +331,22 @@ def test_geodesic_sphere_mode_on_scans_against_exact(name):
     dp, _ = sphere_geodesic(V[perm], Fp, [int(inv[src[0]])], S=S[perm])
     d0, _ = sphere_geodesic(V, F, [int(src[0])], S=S)
     assert np.allclose(dp[inv], d0, rtol=1e-9, atol=1e-12)
+
+
+def test_geodesic_marches_on_resolved_charts_beyond_the_paths_budget(monkeypatch):
+    """With room for 3 Steiner points per edge only, 'auto' marches where the charts resolve the
+    surface (S = V: the same result as method='charts') and still takes the paths where they do not
+    (the squeezed map)."""
+    from core.geodesic import paths
+    from core.sphere.geodesic import sphere_geodesic
+    V, F, S = _squeezed_icosphere()
+    monkeypatch.setattr(paths, 'PATH_BUDGET', paths.path_links(len(F), 3 * len(F) // 2, 3)
+                        + paths.path_links(len(F), 3 * len(F) // 2, 1))
+    d, rep = sphere_geodesic(V, F, [5], S=V)
+    dc, _ = sphere_geodesic(V, F, [5], S=V, method='charts')
+    assert rep['method'] == 'charts' and rep['steiner_points'] is None and np.array_equal(d, dc)
+    d, rep = sphere_geodesic(V, F, [5], S=S, grid=128)
+    assert rep['method'] == 'paths' and rep['steiner_points'] == 3
 
 
 def test_surface_paths_sources_scale_and_budget():

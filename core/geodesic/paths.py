@@ -118,9 +118,10 @@ def path_links(n_faces, n_edges, k):
     return n_faces * (3 * k * k + 3 * k) + n_edges * (k + 1)
 
 
-def path_points(n_faces, n_edges, budget=PATH_BUDGET):
+def path_points(n_faces, n_edges, budget=None):
     """The largest ``k`` of ``PATH_K`` whose graph and Richardson's coarse one, ``(k - 1) / 2`` points
-    per edge, fit in ``budget`` links; None if none does."""
+    per edge, fit in ``budget`` links (None: ``PATH_BUDGET``); None if none does."""
+    budget = PATH_BUDGET if budget is None else budget
     for k in PATH_K:
         if path_links(n_faces, n_edges, k) + path_links(n_faces, n_edges, (k - 1) // 2) <= budget:
             return k

@@ -55,8 +55,8 @@ the numpy sweep of ``core.eikonal``), with the surface metric ``ds = |dw| / spee
 in a band; time is marched in buckets no longer than the shortest crossing of that band, so every
 optimal path segment within a bucket lies in one chart, and the charts exchange their times through
 the overlap after each bucket. On an icosphere the mean relative error against great circles is about
-0.05% at the default grid. Where the charts do not resolve the surface (a sphere map that shrinks parts
-100x or folds), shortest surface paths answer instead (``core.geodesic.paths``).
+0.05% at the default grid. By default shortest surface paths (``core.geodesic.paths``) answer instead
+whenever the mesh fits their memory budget: more accurate, and they need no resolved sphere map.
 
 Measures: per triangle, ``mu = sqrt(area of the flat triangle of the
 mapped vertices / 3D area)``, normalised so that the totals agree; ``qc`` from the 2x2 Jacobian between
