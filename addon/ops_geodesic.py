@@ -246,6 +246,7 @@ def geodesic_object(context, obj=None, source='AUTO', grid=0, boundary='UNIFORM'
             'source_count': int(len(sources)), 'source_description': described,
             'boundary': boundary, 'flattening': origin, 'grid': [nx, ny],
             'cell': rep['cell'], 'masked_fraction': rep['masked_fraction'], 'solver': rep['solver'],
+            'paths_islands': rep['paths_islands'], 'steiner_points': rep['steiner_points'],
             'distance_range': [lo, hi], 'bands': int(bands), 'mesh_hash': digest,
             'islands': rep['islands'], 'islands_reached': rep['islands_reached'],
             'unreached_vertices': int((~ok & md_used(md)).sum()), 'use_seams': bool(use_seams),
@@ -333,7 +334,9 @@ class ConformalGeodesicSettings(bpy.types.PropertyGroup):
 GEODESIC_ROWS = [
     ("Sources", 'source_description'),
     ("Max distance", lambda r: f"{r['distance_range'][1]:.4g}"),
-    ("Grid", lambda r: f"{r['grid'][0]} x {r['grid'][1]}"),
+    ("Grid", lambda r: (f"surface paths, {r['steiner_points']} points per edge" if r.get('paths_islands')
+                        == r.get('islands_reached') and r.get('steiner_points')
+                        else f"{r['grid'][0]} x {r['grid'][1]}")),
     ("Solver", 'solver'),
     ("Flattening", 'flattening'),
     ("Error estimate", lambda r: f"{100 * r['error_estimate']:.2g} %" if 'error_estimate' in r else "-"),

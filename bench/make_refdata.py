@@ -3,14 +3,15 @@ a dev-only dependency: requirements-dev.txt).
 
     .venv/bin/python bench/make_refdata.py            # writes tests/data/geodesic_ref_*.npz
     .venv/bin/python bench/make_refdata.py --check    # only the flat-square sanity check
-    .venv/bin/python bench/make_refdata.py --closed   # only the closed meshes' files
+    .venv/bin/python bench/make_refdata.py --closed   # only the closed meshes' and suzanne's files
 
 Each file ``geodesic_ref_<surface>_<n>.npz`` holds ``sources`` (k,) int32 vertex indices and
 ``dist`` (k, n*n) float32 exact distances from each source to every vertex of
 ``core.surfaces.make_surface(surface, n)``. The generator first checks pygeodesic on a flat square,
 where the exact answer is the Euclidean distance. ``geodesic_ref_<name>_closed.npz`` holds the same for
 the closed meshes ``tests/data/sphere_<name>.npz`` (vertices as float64 of the stored float32), for
-sphere mode's tests."""
+sphere mode's tests; ``geodesic_ref_suzanne_island.npz`` the largest island of tests/data/suzanne.obj
+cut along its seams, with its ``V`` and ``F``."""
 import argparse
 import os
 import sys
@@ -40,6 +41,23 @@ CLOSED = (
 )
 
 
+def suzanne_island():
+    """(V (k,3), F (m,3)) of the largest island of tests/data/suzanne.obj cut along its OBJ seams (the
+    UV islands of its ``vt`` indices), triangulated, with its own vertex numbering."""
+    from core.atlas.islands import seams_from_corner_ids, unwrap
+    from core.io.obj import read_obj
+    from core.mesh.triangulate import triangulate
+    mesh = read_obj(os.path.join(DATA, 'suzanne.obj'))
+    tc, _ = triangulate(mesh.corner_verts, mesh.sizes, mesh.V)
+    F = mesh.corner_verts[tc]
+    seams = seams_from_corner_ids(F, mesh.corner_uvs[tc], len(mesh.V))
+    res = unwrap(mesh.V, F, seams=seams, boundary='area', pack=False, allow_loose=True)
+    big = np.argmax(np.bincount(res.face_island))
+    Fs = res.F[res.face_island == big]
+    verts, Fl = np.unique(Fs, return_inverse=True)
+    return mesh.V[res.vert_of[verts]].astype(np.float64), Fl.reshape(-1, 3).astype(np.int64)
+
+
 def exact_distances(V, F, sources):
     """(k, n) float64 exact polyhedral geodesic distances from each vertex in ``sources``."""
     from pygeodesic import geodesic
@@ -67,7 +85,7 @@ def check_flat():
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--check', action='store_true', help='only run the flat-square check')
-    ap.add_argument('--closed', action='store_true', help="only the closed meshes' files")
+    ap.add_argument('--closed', action='store_true', help="only the closed meshes' and suzanne's files")
     args = ap.parse_args(argv)
     check_flat()
     if args.check:
@@ -80,6 +98,15 @@ def main(argv=None):
         np.savez_compressed(path, sources=np.array(sources, np.int32), dist=D.astype(np.float32))
         print(f"{name} (closed) sources {sources}: max distance {D.max():.4f} -> "
               f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
+    # the largest island of suzanne.obj cut along its OBJ seams, as a mesh of its own (a disk)
+    Vi, Fi = suzanne_island()
+    src = (0, len(Vi) // 2, len(Vi) - 1)
+    D = exact_distances(Vi, Fi, src)
+    path = os.path.join(DATA, 'geodesic_ref_suzanne_island.npz')
+    np.savez_compressed(path, V=Vi.astype(np.float64), F=Fi.astype(np.int32),
+                        sources=np.array(src, np.int32), dist=D)
+    print(f"suzanne's largest island ({len(Fi)} triangles) sources {src} -> "
+          f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
     if args.closed:
         return 0
     for name, n, sources in REFS:

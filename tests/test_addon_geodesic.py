@@ -269,3 +269,14 @@ def test_parts_are_islands_and_seams_cut(addon, bl):
     # the pole-to-equator distance is a quarter of the (polyhedral) great circle, about pi/2
     eq = np.abs(co[:, 2]) < 1e-6
     assert np.all(np.abs(d[eq] - np.pi / 2) < 0.05)
+    # the automatic choice: each coarse hemisphere is answered by surface paths, named in the report and
+    # the panel; the meridian's 4 edges are a path to the equator, and a shortest path on a convex
+    # polyhedron avoids its vertices, so a little shorter
+    assert bpy.ops.mesh.conformal_geodesic_distance(grid=0, use_seams=True) == {'FINISHED'}
+    rep = report_of(me)
+    assert rep['paths_islands'] == rep['islands_reached'] == 1 and rep['steiner_points'] >= 9
+    d2 = point_attr(me, 'geodesic_distance')
+    chords = 8 * np.sin(np.pi / 16)
+    assert (d2[eq] <= chords * (1 + 1e-9)).all() and (d2[eq] > 0.98 * chords).all(), d2[eq]
+    from conformal_flatten.addon.ops_geodesic import GEODESIC_ROWS
+    assert dict(GEODESIC_ROWS)["Grid"](rep).startswith('surface paths')

@@ -359,10 +359,17 @@ def test_surface_paths_sources_scale_and_budget():
     b = paths.steiner_distances(V, F, src=200, k=5)[0]
     ab = paths.steiner_distances(V, F, src=[3, 200], k=5)[0]
     assert np.array_equal(ab, np.minimum(a, b))
-    d, est = paths.surface_paths(V, F, [3, 200], 7)
+    d, est, k = paths.surface_paths(V, F, [3, 200], 7)
     Q, _ = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))
-    d2, est2 = paths.surface_paths(2.5 * V @ Q.T + 1.0, F, [200, 3], 7)
-    assert np.allclose(d2, 2.5 * d, rtol=1e-9) and est2 == pytest.approx(est, rel=1e-6)
+    d2, est2, k2 = paths.surface_paths(2.5 * V @ Q.T + 1.0, F, [200, 3], 7)
+    assert np.allclose(d2, 2.5 * d, rtol=1e-9) and est2 == pytest.approx(est, rel=1e-6) and k == k2 == 7
+    # a point source at a vertex's position (barycentric (1, 0, 0) of one of its triangles) is that
+    # vertex; with a target below the estimate, k grows and the estimate falls below the first
+    f = int(np.flatnonzero((F == 3).any(1))[0])
+    dp, _, _ = paths.surface_paths(V, F, [200], 7, X=V[[3]], faces=[f])
+    assert np.allclose(dp, d, rtol=1e-12, atol=1e-12)
+    d3, est3, k3 = paths.surface_paths(V, F, [3, 200], 5, target=0.5 * est)
+    assert k3 > 5 and est3 < est
     ks = [paths.path_points(m, 3 * m // 2) for m in (1_000, 40_000, 60_000, 80_000, 200_000, 400_000)]
     assert ks == [9, 7, 5, 5, 3, None], ks
 

@@ -17,8 +17,9 @@ STEINER = 15         # Steiner points per edge in the refined seed's shortest pa
 
 def _steiner_graph(V, F, src=None, X=None, src_faces=None, k=STEINER):
     """Shortest paths on the surface of the triangles ``F`` (m,3) (vertices ``V`` (n,3)) from source
-    vertices ``src`` (an index or (s,) indices: the distance to the nearest) or a point ``X`` (3,) in
-    the triangles ``src_faces``, through ``k`` Steiner points on every edge (the graph of the module's
+    vertices ``src`` (an index or (s,) indices: the distance to the nearest) and/or surface points:
+    one point ``X`` (3,) in the triangles ``src_faces`` (its star), or points ``X`` (p,3) each in its
+    triangle ``src_faces`` (p,); through ``k`` Steiner points on every edge (the graph of the module's
     docstring). Returns ``(dS (p,) at every graph point (the n vertices first); P (p,3) the points;
     own (m, 3 + 3k) the points on each triangle's boundary; ue (e,2) the edges, sorted; pid (e,k) the
     indices of their points)``."""
@@ -45,13 +46,25 @@ def _steiner_graph(V, F, src=None, X=None, src_faces=None, k=STEINER):
     b = np.r_[own[:, ib].ravel(), chain[:, 1:].ravel()]
     N = len(pts)
     w = np.maximum(np.linalg.norm(pts[a] - pts[b], axis=1), 1e-300)
-    if src is not None:
+    if X is None or src_faces is None:                    # vertex sources only (X ignored)
         G = sp.coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(N, N)).tocsr()
         dS = dijkstra(G, directed=True, indices=np.unique(np.atleast_1d(src)).astype(np.int64),
                       min_only=True)
     else:
-        cand = np.unique(own[np.asarray(src_faces)].ravel())
-        wx = np.maximum(np.linalg.norm(pts[cand] - X, axis=1), 1e-300)
+        # a virtual source joined to the source vertices (length 0: 1e-300, as csgraph drops zeros)
+        # and to every point on the boundary of each source point's triangle(s) (the straight segment)
+        X = np.asarray(X, np.float64)
+        if X.ndim == 1:
+            cand = np.unique(own[np.asarray(src_faces)].ravel())
+            wx = np.linalg.norm(pts[cand] - X, axis=1)
+        else:
+            cand = own[np.asarray(src_faces)]                                      # (p, 3 + 3k)
+            wx = np.linalg.norm(pts[cand] - X[:, None], axis=2).ravel()
+            cand = cand.ravel()
+        if src is not None:
+            sv = np.unique(np.atleast_1d(src)).astype(np.int64)
+            cand, wx = np.r_[cand, sv], np.r_[wx, np.zeros(len(sv))]
+        wx = np.maximum(wx, 1e-300)
         G = sp.coo_matrix((np.r_[w, w, wx], (np.r_[a, b, np.full(len(cand), N)], np.r_[b, a, cand])),
                           shape=(N + 1, N + 1)).tocsr()
         dS = dijkstra(G, directed=True, indices=N)[:N]
@@ -108,6 +121,7 @@ def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapo
 # ``surface_paths`` divides the excess by this to estimate the error it returns (slightly cautious).
 EXTRAPOLATION_GAIN = 2.5
 PATH_K = (9, 7, 5, 3)       # Steiner points per edge that ``surface_paths`` tries, best first (odd)
+PATH_K_MAX = 31            # the most Steiner points per edge ``surface_paths`` refines to for its target
 PATH_BUDGET = 12_000_000  # graph links (point pairs, both graphs) ``surface_paths`` may build; ~1 GB peak
 
 
@@ -128,19 +142,37 @@ def path_points(n_faces, n_edges, budget=None):
     return None
 
 
-def surface_paths(V, F, sources, k):
+def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_K_MAX):
     """Geodesic distances on the whole surface of ``F`` (m,3) (vertices ``V`` (n,3), mesh units) to the
-    nearest of the source vertices ``sources`` (s,): shortest paths through ``k`` (odd) Steiner points
-    per edge, Richardson-extrapolated (``steiner_distances``). Returns ``(dist (n,) float64, inf off F
-    and where no path reaches; estimate)``: ``estimate`` is the mean relative excess of the plain
-    ``k``-point paths over the vertices beyond one mean edge of the sources (the correction Richardson
-    subtracts) over ``EXTRAPOLATION_GAIN``: the estimated mean relative error of ``dist``
+    nearest of the source vertices ``sources`` (s,) and the surface points ``X`` (p,3) in the
+    triangles ``faces`` (p,): shortest paths through ``k`` (odd) Steiner points per edge,
+    Richardson-extrapolated (``steiner_distances``). With a ``target`` (mean relative error) that the
+    estimate exceeds, once more with the ``k`` (odd, at most ``k_max``, within ``PATH_BUDGET``) that
+    the excess's fall as ``k^-STEINER_ORDER`` predicts for 0.8 of it. Returns ``(dist (n,) float64, inf
+    off F and where no path reaches; estimate; k used)``: ``estimate`` is the mean relative excess of
+    the plain ``k``-point paths over the vertices beyond one mean edge of the sources (the correction
+    Richardson subtracts) over ``EXTRAPOLATION_GAIN``: the estimated mean relative error of ``dist``
     (docs/geodesic.md, "Sphere mode")."""
     V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64)
-    src = np.unique(np.atleast_1d(np.asarray(sources, np.int64)))
-    dv, _, _, _, ev = steiner_distances(V, F, src=src, k=k, extrapolate=True, excess=True)
+    src = None if sources is None or not len(np.atleast_1d(sources)) else \
+        np.unique(np.atleast_1d(np.asarray(sources, np.int64)))
+    if X is not None and not len(X):
+        X = faces = None
     edge = float(np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean())
-    far = np.isfinite(dv) & (dv > edge)
-    estimate = float(np.mean(ev[far] / (dv[far] + ev[far]))) / EXTRAPOLATION_GAIN if far.any() else 0.0
-    return dv, estimate
+    while True:
+        dv, _, _, _, ev = steiner_distances(V, F, src=src, X=X, src_faces=faces, k=k, extrapolate=True,
+                                            excess=True)
+        far = np.isfinite(dv) & (dv > edge)
+        estimate = float(np.mean(ev[far] / (dv[far] + ev[far]))) / EXTRAPOLATION_GAIN if far.any() else 0.0
+        if target is None or estimate <= target:
+            return dv, estimate, k
+        want = k * (estimate / (0.8 * target)) ** (1.0 / STEINER_ORDER)
+        k_new = min(int(np.ceil(want)) | 1, k_max)
+        from ..mesh.topology import unique_edges
+        ne = len(unique_edges(F)[0])
+        while k_new > k and path_links(len(F), ne, k_new) + path_links(len(F), ne, k_new // 2) > PATH_BUDGET:
+            k_new -= 2
+        if k_new <= k:
+            return dv, estimate, k
+        k, target = k_new, None

@@ -14,7 +14,11 @@ Set-up (``GeodesicSolver``):
    several parts, or ``seams`` (cuts), go through ``core.atlas.islands.unwrap`` (one flattening per
    island, unpacked, true scale). A given ``uv`` is split into its connected parts. Distances are
    measured on the cut surface: infinite between islands.
-2. Per chart: rotate the map to its smallest bounding rectangle (``align_uv``), take the realised
+2. Per chart, which answers: the grid, or shortest surface paths through Steiner points
+   (``core.geodesic.paths.surface_paths``) where they cost at most about half the grid's query time
+   at the grid size its error target asks for (``paths_choice``: small, coarse islands whose map
+   varies a lot). The rest of this list is the grid's.
+   Per chart: rotate the map to its smallest bounding rectangle (``align_uv``), take the realised
    per-triangle ``mu = sqrt(A_uv / A_3d)`` (``face_mu``) and the per-vertex ``mu``
    (``core.mesh.measures.vertex_mu``), choose the grid size for the error target (``choose_grid``),
    rasterise ``mu`` with linear interpolation onto the grid (``Grid``); nodes outside the domain are
@@ -52,9 +56,12 @@ import numpy as np
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
-from .paths import STEINER, steiner_distances
+from .paths import (PATH_BUDGET, PATH_K, PATH_K_MAX, STEINER, path_links, path_points, steiner_distances,
+                    surface_paths)
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
+METHODS = ('auto', 'grid', 'paths')
+PATH_COST = 2.0      # 'auto': surface paths where their links are at most this many per grid node update
 MU_MODES = ('metric', 'vertex', 'face')
 GRID_MIN, GRID_MAX = 64, 4096
 GRID_AUTO_MIN = 256          # the automatic grid never goes below this (nodes along the longer side)
@@ -951,6 +958,34 @@ def unresolved_faces(mu_face: np.ndarray, edge: np.ndarray, h: float) -> np.ndar
 
 # --------------------------------------------------------------------------------------------------
 # charts: one flat grid per island
+def paths_choice(ch, method, grid, mu_mode):
+    """Steiner points per edge (int) if the chart ``ch`` is to be answered by surface paths
+    (``core.geodesic.paths``), else None. 'grid': never; 'paths': always (the most ``path_points``
+    allows, at least ``PATH_K[-1]``); 'auto' with an automatic grid: the largest odd ``k`` up to
+    ``PATH_K_MAX`` whose graph and Richardson's coarse one have at most ``PATH_COST`` links per node
+    update of the grid the target asks for (its nodes times its marches; and at most
+    ``PATH_BUDGET``), if that ``k`` is at least ``PATH_K[0]``. A link costs about a quarter of a node
+    update (spot: 2M links in 0.5 s; a query of its 832-node grid ~1 s for ~1M updates), so the paths
+    run where they take at most about half the march's time, with as many points as that time buys.
+    That picks small, coarse islands whose map varies a lot, where the automatic grid grows large
+    and its estimate is least reliable (suzanne's face: grid 2240, 0.8-1.9 % mean, 10 s a query), and
+    leaves fine meshes to the grid (bump at n = 65: 2.7M links at k = 9 against 0.8M updates)."""
+    if method == 'grid' or (method == 'auto' and grid is not None):
+        return None
+    from ..mesh.topology import unique_edges
+    m, ne = len(ch.F), len(unique_edges(ch.F)[0])
+    if method == 'paths':
+        return path_points(m, ne) or PATH_K[-1]
+    marches = 1 + (METRIC_PASSES if mu_mode == 'metric' else 0)
+    allow = min(PATH_BUDGET, PATH_COST * ch.nodes * marches)
+    k = PATH_K[0]
+    if path_links(m, ne, k) + path_links(m, ne, k // 2) > allow:
+        return None
+    while k + 2 <= PATH_K_MAX and path_links(m, ne, k + 2) + path_links(m, ne, (k + 2) // 2) <= allow:
+        k += 2
+    return k
+
+
 class Chart:
     """One island's flat chart and its rasterised ``mu``, kept for any number of queries.
 
@@ -966,6 +1001,7 @@ class Chart:
 
     def __init__(self, V, F, uv, verts, faces, grid, target, mu_mode='metric', align=True):
         self.verts, self.faces, self.V, self.F = verts, faces, V, F
+        self.paths_k = None                     # set by the solver: Steiner points if paths answer
         self.uv = uv = align_uv(uv) if align else uv
         self.mu_face = mu_f = face_mu(V, F, uv)
         self.area = face_areas(V, F)
@@ -1100,7 +1136,12 @@ class GeodesicSolver:
     similarity), 'vertex' (the first march only) or 'face' (piecewise constant per-triangle mu).
     ``error_target``: the estimated mean relative error to reach (default 1e-3); a chart
     whose estimate stays above it gets a warning in every report. ``progress(fraction, message)``:
-    optional callback. Raises ``ConformalError``.
+    optional callback. ``method``: 'grid' marches on every chart; 'paths' answers every island by
+    shortest surface paths through Steiner points (``core.geodesic.paths.surface_paths``, at least
+    ``PATH_K[-1]`` points per edge); 'auto' (default) takes the paths on an island where they are
+    cheaper than the grid its error target needs (``paths_cheaper``: small, coarse islands whose map
+    varies a lot, where the grid grows large and still misses, such as suzanne's), else the grid.
+    Raises ``ConformalError``.
 
     Attributes: ``charts`` (list of ``Chart``), ``vert_of`` (N,) input vertex of each split vertex,
     ``face_island`` (m,), ``report`` (dict: set-up figures, including ``seconds`` {flatten,
@@ -1108,8 +1149,11 @@ class GeodesicSolver:
 
     def __init__(self, V: np.ndarray, F: np.ndarray, uv: np.ndarray | None = None, boundary: str = 'uniform',
                  grid: int | None = None, solver: str = 'auto', mu_mode: str = 'metric',
-                 seams: np.ndarray | None = None, error_target: float = ERROR_TARGET, progress=None):
+                 seams: np.ndarray | None = None, error_target: float = ERROR_TARGET, progress=None,
+                 method: str = 'auto'):
         say = progress or (lambda f, msg: None)
+        if method not in METHODS:
+            raise ConformalError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
         t0 = time.perf_counter()
         V, F = _check_mesh_arrays(V, F)
         if mu_mode not in MU_MODES:
@@ -1179,13 +1223,18 @@ class GeodesicSolver:
             self.chart_of_split[verts] = c
             self.local_of_split[verts] = np.arange(len(verts))
             self.charts.append(ch)
+        for ch in self.charts:
+            ch.paths_k = paths_choice(ch, method, grid, mu_mode)
+            if ch.paths_k:                      # a token grid: the island is answered by paths
+                ch.size, ch.limit, ch.nodes = GRID_MIN, None, float(GRID_MIN) ** 2
         if grid is None:                        # automatic grids: all islands within the node budget
             total = sum(ch.nodes for ch in self.charts)
             if total > NODE_BUDGET:
                 k = np.sqrt(NODE_BUDGET / total)
                 for ch in self.charts:
-                    ch.size = int(max(GRID_MIN, 64 * np.floor(ch.size * k / 64)))
-                    ch.limit = ch.limit or 'budget'
+                    if not ch.paths_k:
+                        ch.size = int(max(GRID_MIN, 64 * np.floor(ch.size * k / 64)))
+                        ch.limit = ch.limit or 'budget'
         for ch in self.charts:
             ch.rasterise(mu_mode)
         # the edge graph of the cut surface, for the upper bound (Dijkstra)
@@ -1206,6 +1255,10 @@ class GeodesicSolver:
             return None
         ch = self.charts[chart]
         where = f" on island {chart + 1} of {len(self.charts)}" if len(self.charts) > 1 else ""
+        if ch.paths_k:
+            return (f"estimated mean error {100 * est:.3g}%{where} is above the target "
+                    f"{100 * self.error_target:.3g}% (surface paths: the memory budget allows no more "
+                    "Steiner points per edge): subdivide the mesh")
         msg = (f"estimated mean error {100 * est:.3g}%{where} is above the target "
                f"{100 * self.error_target:.3g}% (grid {ch.size}")
         if ch.limit == 'mesh' or ERR_MESH * ch.spread > 0.5 * self.error_target:
@@ -1277,6 +1330,7 @@ class GeodesicSolver:
         dist_s = np.full(N, np.inf)
         marches, radii, reached = 0, [], 0
         hybrid, hybrid_skipped, refined = 0, 0, 0
+        path_est, path_k = {}, []
         active = np.unique(np.r_[self.chart_of_split[src_split], self.face_island[pf]]).astype(np.int64)
         for k, c in enumerate(active):
             say(0.05 + 0.85 * k / len(active), 'marching')
@@ -1290,6 +1344,15 @@ class GeodesicSolver:
             # vertices that another source is nearer to)
             sel = self.vert_of[src_split[self.chart_of_split[src_split] == c]]
             own = np.r_[by_vertex[np.searchsorted(s[by_vertex], sel)], len(s) + np.flatnonzero(mine)]
+            if ch.paths_k:                      # an island answered by surface paths (``paths_choice``)
+                Xp = np.einsum('kc,kcd->kd', pb[mine], ch.V[ch.F[src_faces]]) if mine.any() else None
+                d, path_est[c], k_used = surface_paths(ch.V, ch.F, loc, ch.paths_k, X=Xp,
+                                                       faces=src_faces if mine.any() else None,
+                                                       target=self.error_target)
+                path_k.append(k_used)
+                dist_s[ch.verts] = d
+                reached += 1
+                continue
             d, r, nm, _, nf = self._march_chart(ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius,
                                                 calibrate, own=own)
             refined += nf
@@ -1326,6 +1389,9 @@ class GeodesicSolver:
         ests = []
         for c in active:
             ch = self.charts[c]
+            if c in path_est:
+                ests.append(path_est[c])
+                continue
             dc = dist_s[ch.verts]
             dc = dc[np.isfinite(dc) & (dc > 0)]
             ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.spread,
@@ -1349,9 +1415,12 @@ class GeodesicSolver:
         report = dict(self.report)
         report.update({
             'grid': [ny, nx], 'cell': G.grid.h, 'masked_fraction': float(1 - G.grid.inside.mean()),
-            'solver': self.solver, 'sources': int(len(X_src)), 'seed_radius': float(min(radii)),
+            'solver': self.solver, 'sources': int(len(X_src)),
+            'seed_radius': float(min(radii)) if radii else None,
             'on_mesh': hybrid, 'refined_sources': refined, 'marches': marches,
-            'metric_passes': max(self.charts[c].metric_passes for c in active),
+            'metric_passes': max([self.charts[c].metric_passes for c in active if c not in path_est],
+                                 default=0),
+            'paths_islands': len(path_est), 'steiner_points': max(path_k) if path_k else None,
             'islands': len(self.charts), 'islands_reached': reached,
             'error_estimate': est, 'clamped': clamped, 'filled_from_edges': filled, 'warnings': warnings,
             'seconds': {k: round(v, 4) for k, v in seconds.items()},

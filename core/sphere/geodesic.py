@@ -7,7 +7,7 @@ import numpy as np
 
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
-from ..geodesic.paths import PATH_K, path_points, surface_paths
+from ..geodesic.paths import PATH_K, PATH_K_MAX, path_points, surface_paths
 from ..geodesic.solver import ERROR_TARGET
 from ..mesh.topology import unique_edges
 from ..mesh.validate import check_mesh
@@ -300,7 +300,7 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     if not 5.0 <= overlap <= 60.0:
         raise ConformalError("overlap must be between 5 and 60 degrees")
     report = {}
-    k = path_points(len(F), len(unique_edges(F)))
+    k = path_points(len(F), len(unique_edges(F)[0]))
     direct = method == 'paths' or (method == 'auto' and k is not None and k >= 5)
     if S is None and direct:
         # the paths need no sphere map: only the input check that mapping would make
@@ -338,8 +338,7 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     if direct:
         say(0.3, 'shortest surface paths')
         t = time.perf_counter()
-        k = k or PATH_K[-1]
-        dist, estimate = surface_paths(V, F, src, k)
+        dist, estimate, k = surface_paths(V, F, src, k or PATH_K[-1], target=ERROR_TARGET)
         used, buckets, W, chosen = None, 0, None, 'paths'
     else:
         say(0.3, 'marching')
@@ -377,7 +376,7 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
                             "larger grid, or cut the mesh along seams and use the planar solver")
     elif estimate > ERROR_TARGET:
         why = ("the mesh is too large for more Steiner points per edge in the memory budget"
-               if k < PATH_K[0] else "the mesh's triangles are too irregular for its Steiner points")
+               if k < PATH_K_MAX else f"even {k} Steiner points per edge are too few for this mesh")
         warnings.append(f"the surface paths' error estimate is {100 * estimate:.2g}% (target "
                         f"{100 * ERROR_TARGET:.2g}%): {why}")
     nv = int(clamped['below_euclid'] + clamped['above_edges'])
