@@ -18,7 +18,8 @@ options only marches. Otherwise a whole-mesh, single-island result of the flatte
 
 Several parts are one island each (distances are infinite between them: such vertices get 0 in the
 attribute and the no-value grey). With ``use_seams`` the surface is cut along the edges marked as
-seams and distances are measured on the cut surface. A closed part needs seams or sphere mode.
+seams and distances are measured on the cut surface. A closed part without seams is measured on the
+closed surface by surface paths (``core.geodesic.paths``).
 
 Every report carries ``error_estimate`` (mean relative error, from the grid's resolution on the
 surface) and ``warnings``; the operator reports a WARNING when that list is not empty. Everything is
@@ -300,8 +301,8 @@ class MESH_OT_conformal_geodesic_distance(bpy.types.Operator):
                                    "attribute (0: plain colour map)")
     use_seams: BoolProperty(name="Cut Along Seams", default=False,
                             description="Cut the surface along the edges marked as seams and measure "
-                                        "distances on the cut surface (needed for closed meshes outside "
-                                        "sphere mode); distances do not cross between pieces")
+                                        "distances on the cut surface; distances do not cross between "
+                                        "pieces")
 
     @classmethod
     def poll(cls, context):

@@ -258,10 +258,14 @@ def anchor_runs(V, F, sets, post=lambda d: d):
         if fn is None:
             continue
         d, tq = {}, []
-        for k in SETS:
-            t = time.perf_counter()
-            d[k] = post(fn(sets[k]))
-            tq.append(time.perf_counter() - t)
+        try:
+            for k in SETS:
+                t = time.perf_counter()
+                d[k] = post(fn(sets[k]))
+                tq.append(time.perf_counter() - t)
+        except RuntimeError as exc:                 # e.g. geometry-central on a non-manifold mesh
+            print(f"# {name} failed: {exc}", flush=True)
+            continue
         out.append((name, d, setup, float(np.mean(tq))))
     return out
 
@@ -407,7 +411,8 @@ def run_mesh(name, grids, rows, calib, plot, sphere=False):
     evaluate(f'ours default ({g_def})', label, g_def, d, t_setup, tq, rep)
     if WHERE:
         where_worst(name, g_def, gs, sets, D, keep, d, bnd, WHERE)
-    calib.append({'mesh': name, 'grid': g_def, 'cell': ch.cell, 'reflex': ch.reflex,
+    calib.append({'mesh': name, 'grid': g_def, 'cell': getattr(ch, 'cell', None),
+                  'reflex': getattr(ch, 'reflex', None),
                   'mean': results[f'ours default ({g_def})']['mean'], 'estimate': rep['estimate']})
     for g in grids:
         if g == g_def:

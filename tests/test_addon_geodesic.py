@@ -163,9 +163,8 @@ def test_bands_change_only_the_colours(addon, bl):
 
 
 def test_failure_leaves_the_mesh_untouched(addon, bl):
-    # a closed surface cannot be flattened as a disk
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)
-    obj = bpy.context.active_object
+    # a mesh of loose vertices has no surface
+    obj = bl.mesh_object('loose', np.random.default_rng(0).normal(size=(5, 3)), np.zeros((0, 3), np.int64))
     before = bl.mesh_snapshot(obj.data)
     with pytest.raises(RuntimeError):
         bpy.ops.mesh.conformal_geodesic_distance(grid=256)
@@ -231,7 +230,8 @@ def test_solver_is_kept_for_a_second_source(addon, bl, monkeypatch):
 
 def test_parts_are_islands_and_seams_cut(addon, bl):
     """Two parts: the part with the source gets distances, the other none (0 and grey), with a
-    warning. A closed UV sphere fails without seams and works with a seam loop on the equator."""
+    warning. A closed UV sphere gets surface paths without seams, and distances on the cut surface
+    with a seam loop on the equator."""
     from conformal_flatten.core.surfaces import make_surface
     V1, F1 = make_surface('bump', 17)
     V = np.vstack([V1, V1 + [6.0, 0.0, 0.0]])
@@ -246,14 +246,19 @@ def test_parts_are_islands_and_seams_cut(addon, bl):
     assert d[100] < 1e-6 and (d[len(V1):] == 0).all() and (d[:len(V1)] > 0).sum() == len(V1) - 1
     rgba = point_attr(obj.data, 'geodesic_distance_color', 4, 'color')
     assert np.allclose(rgba[len(V1):, :3], 0.5)
-    # a closed sphere: an error without seams, distances on the cut surface with them
+    # a closed sphere: without seams surface paths on the closed surface (the south pole is half a
+    # meridian of 8 chords away, a little less), distances on the cut surface with seams
     bpy.context.scene.cursor.location = (0.0, 0.0, 0.0)
     bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8)        # at the cursor: the origin
     sphere = bpy.context.active_object
     me = sphere.data
-    with pytest.raises(RuntimeError, match='closed'):
-        bpy.ops.mesh.conformal_geodesic_distance(grid=256)
     co = np.array([v.co[:] for v in me.vertices])
+    bpy.context.scene.cursor.location = tuple(co[int(np.argmax(co[:, 2]))])
+    assert bpy.ops.mesh.conformal_geodesic_distance(grid=0) == {'FINISHED'}
+    rep = report_of(me)
+    assert rep['islands'] == 1 and rep['paths_islands'] == 1
+    d = point_attr(me, 'geodesic_distance')
+    assert 0.97 * 16 * np.sin(np.pi / 16) < d[int(np.argmin(co[:, 2]))] <= 16 * np.sin(np.pi / 16) + 1e-6
     for e in me.edges:
         a, b = e.vertices
         e.use_seam = bool(abs(co[a, 2]) < 1e-6 and abs(co[b, 2]) < 1e-6)

@@ -428,6 +428,13 @@ def test_cli_writes_one_distance_per_vertex(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith('error:') and 'out of range' in err and 'Traceback' not in err
     assert not bad.exists()
+    # a closed mesh: surface paths, named in the summary line
+    from core.surfaces import icosphere
+    Vs, Fs = icosphere(4)
+    write_obj(str(obj), Vs, Fs)
+    rc = main(['geodesic', str(obj), '--source', '3', '--out', str(out)])
+    assert rc == 0 and 'surface paths on 1 of 1 islands' in capsys.readouterr().out
+    assert np.allclose(np.loadtxt(out), geo.geodesic_distance(Vs, Fs, [3])[0], rtol=1e-7)
 
 
 def test_loose_vertex_gets_nan_and_does_not_shift_the_grid(flat):
@@ -630,11 +637,28 @@ def test_seams_cut_the_surface():
     assert rep['clamped']['above_edges'] >= 0 and rep['islands_reached'] == 1
 
 
-def test_a_closed_part_needs_seams_or_sphere_mode():
+def test_a_closed_part_is_answered_by_surface_paths():
+    """A closed part has no flat chart: without seams it is answered by surface paths on the closed
+    surface (here beside an open part, answered by the grid), close to the great circles (the
+    polyhedron's own distances are slightly shorter); method='grid' keeps the error that asks for
+    seams or sphere mode."""
     from core.surfaces import icosphere
-    V, F = icosphere(2)
+    V, F = icosphere(8)
+    Vb, Fb = make_surface('bump', 33)
+    W, G = np.vstack([V, Vb + [5.0, 0.0, 0.0]]), np.vstack([F, Fb + len(V)])
+    gs = geo.GeodesicSolver(W, G)
+    assert gs.report['closed_parts'] == 1 and len(gs.charts) == 2
+    d, rep = gs.distance([0, len(V) + 500])
+    U = V / np.linalg.norm(V, axis=1)[:, None]
+    gc = np.arccos(np.clip(U @ U[0], -1, 1)) * np.linalg.norm(V[0])
+    m = gc > 0.1
+    e = (d[:len(V)][m] - gc[m]) / gc[m]
+    assert rep['paths_islands'] == 1 and rep['islands_reached'] == 2
+    assert -0.01 < e.min() and e.max() < 1e-9 and np.abs(e).mean() < 0.005, (e.min(), e.max())
+    db, _ = geo.GeodesicSolver(Vb, Fb).distance([500])
+    np.testing.assert_allclose(d[len(V):], db, rtol=1e-12)          # the open part: unchanged
     with pytest.raises(ConformalError) as exc:
-        geo.geodesic_distance(V, F, [0], grid=256)
+        geo.geodesic_distance(V, F, [0], grid=256, method='grid')
     assert exc.value.code == 'no_boundary' and 'sphere' in str(exc.value)
 
 

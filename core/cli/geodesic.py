@@ -46,9 +46,14 @@ def run(args):
     else:
         ny, nx = report['grid']
         fin = dist[np.isfinite(dist)]
-        print(f"geodesic: {len(dist)} vertices, max {fin.max():.6g}, grid {nx}x{ny}, "
-              f"solver {report['solver']}, estimated mean error {100 * report['error_estimate']:.2g}%, "
-              f"{report['seconds']['total']:.2f} s")
+        how = f"grid {nx}x{ny}, solver {report['solver']}" if nx else ""
+        if report['paths_islands']:
+            paths = (f"surface paths on {report['paths_islands']} of {report['islands_reached']} islands "
+                     f"({report['steiner_points']} points per edge)")
+            how = f"{how}, {paths}" if how else paths
+        est, sec = 100 * report['error_estimate'], report['seconds']['total']
+        print(f"geodesic: {len(dist)} vertices, max {fin.max():.6g}, {how}, "
+              f"estimated mean error {est:.2g}%, {sec:.2f} s")
         for w in report['warnings']:
             print(f"warning: {w}")
     return 0

@@ -958,6 +958,53 @@ def unresolved_faces(mu_face: np.ndarray, edge: np.ndarray, h: float) -> np.ndar
 
 # --------------------------------------------------------------------------------------------------
 # charts: one flat grid per island
+def closed_parts(F, count, face_island):
+    """(count,) bool: the connected parts (``face_island`` (m,) of the triangles ``F`` (m,3)) that have
+    no boundary edge (an edge of one triangle only)."""
+    from ..mesh.topology import halfedges
+    H = np.sort(halfedges(F), axis=1)
+    _, inv, cnt = np.unique(H, axis=0, return_inverse=True, return_counts=True)
+    open_part = np.zeros(count, bool)
+    open_part[np.repeat(face_island, 3)[cnt[inv.ravel()] == 1]] = True
+    return ~open_part
+
+
+def _append_closed(F, shut, part, vert_of, Fs, uvs, face_island, n):
+    """The split arrays of the open parts (``vert_of`` (N,), ``Fs``, ``uvs`` (N,2), ``face_island`` over
+    the open triangles in input order) extended by the closed parts ``shut`` (count,) bool (``part``
+    (m,) the part of each triangle of ``F`` (m,3)): their vertices unsplit, their uv NaN (no chart),
+    one island each after the open ones. Returns ``(vert_of, Fs (m,3), uvs, face_island (m,))`` over
+    all the triangles."""
+    closed_f = shut[part]
+    cv = np.unique(F[closed_f])
+    new = np.full(n, -1, np.int64)
+    new[cv] = len(vert_of) + np.arange(len(cv))
+    Fs_all = np.empty_like(F)
+    Fs_all[~closed_f] = Fs
+    Fs_all[closed_f] = new[F[closed_f]]
+    isl = np.empty(len(F), np.int64)
+    base = int(face_island.max()) + 1 if len(face_island) else 0
+    isl[~closed_f] = face_island
+    isl[closed_f] = base + np.cumsum(shut)[part[closed_f]] - 1
+    return (np.r_[np.asarray(vert_of, np.int64), cv], Fs_all,
+            np.vstack([uvs, np.full((len(cv), 2), np.nan)]), isl)
+
+
+class PathsChart:
+    """A closed part of the mesh, answered by surface paths only (no flat chart, no grid): ``verts``
+    (k,) split vertices, ``V`` (k,3), ``F`` (mi,3) local triangles, ``faces`` (mi,) input triangles,
+    ``paths_k`` the Steiner points per edge (``path_points``; None if the part is too large)."""
+
+    def __init__(self, V, F, verts, faces):
+        from ..mesh.topology import unique_edges
+        self.V, self.F, self.verts, self.faces = V, F, verts, faces
+        self.paths_k = path_points(len(F), len(unique_edges(F)[0]))
+        self.size, self.limit, self.nodes, self.metric_passes = 0, None, 0.0, 0
+
+    def rasterise(self, mu_mode):
+        return self
+
+
 def paths_choice(ch, method, grid, mu_mode):
     """Steiner points per edge (int) if the chart ``ch`` is to be answered by surface paths
     (``core.geodesic.paths``), else None. 'grid': never; 'paths': always (the most ``path_points``
@@ -1126,8 +1173,9 @@ class GeodesicSolver:
     ``core.disk.flatten`` (``boundary`` 'uniform', 'area' or 'free'), else (several parts, seams,
     holes, loose vertices) every island of ``core.atlas.islands.unwrap`` (holes filled virtually;
     ``seams`` (k,2) vertex pairs cut the surface; distances are measured
-    on the cut surface). Distances between islands are infinite. A closed island has no flat chart:
-    use sphere mode (``core.sphere.geodesic``) or mark seams. ``grid``: nodes along the longer UV
+    on the cut surface). Distances between islands are infinite. A closed part (without ``seams``)
+    has no flat chart: surface paths answer it on the closed surface (``PathsChart``), unless
+    ``method`` is 'grid' (then it needs seams or sphere mode). ``grid``: nodes along the longer UV
     side of every chart (64..4096), None: per chart from ``error_target`` (``default_grid_for_target``).
     ``solver``: 'auto' (scikit-fmm if installed, else the numpy sweep), 'skfmm' or 'sweep'.
     ``mu_mode``: 'metric' (default: a first march with the per-vertex mu interpolated linearly, then
@@ -1183,21 +1231,34 @@ class GeodesicSolver:
         else:
             from ..mesh.topology import face_components
             count, face_island = face_components(F, self.n)
+            # closed parts (no boundary edge) have no flat chart: without seams, surface paths answer
+            # them on the closed surface (``method`` 'grid' keeps the error that asks for seams)
+            shut = closed_parts(F, count, face_island) if seams is None and method != 'grid' else \
+                np.zeros(count, bool)
+            part = face_island
             say(0.0, 'flattening')
             from ..mesh.topology import boundary_loops
-            if count == 1 and seams is None and self.on_mesh.all() and len(boundary_loops(F, self.n)) == 1:
+            Fo = F[~shut[face_island]]
+            if not len(Fo):
+                vert_of, Fs, uvs, face_island = np.zeros(0, np.int64), Fo, np.zeros((0, 2)), \
+                    np.zeros(0, np.int64)
+            elif count == 1 and seams is None and self.on_mesh.all() and len(boundary_loops(F, self.n)) == 1:
                 from ..disk.flatten import flatten
                 res = flatten(V, F, boundary=boundary, fit='true_scale', bound=False)
                 vert_of, Fs, uvs = np.arange(self.n), F, res.uv
                 report['mu_ratio'] = res.report.get('mu_ratio')
             else:
                 from ..atlas.islands import unwrap
-                res = unwrap(V, F, seams=seams, boundary=boundary, fit='true_scale', pack=False,
+                res = unwrap(V, Fo, seams=seams, boundary=boundary, fit='true_scale', pack=False,
                              allow_loose=True)
                 vert_of, Fs, uvs = res.vert_of, res.F, res.uv
                 face_island = res.face_island
-                count = int(face_island.max()) + 1
+            if shut.any():
+                vert_of, Fs, uvs, face_island = _append_closed(F, shut, part, vert_of, Fs, uvs, face_island,
+                                                               self.n)
+            count = int(face_island.max()) + 1
             report['boundary'] = boundary
+            report['closed_parts'] = int(shut.sum())
             seconds['flatten'] = time.perf_counter() - t0
         say(0.3, 'rasterising')
         t = time.perf_counter()
@@ -1215,6 +1276,17 @@ class GeodesicSolver:
             Fg = self.Fs[faces]
             verts, Fl = np.unique(Fg, return_inverse=True)
             Fl = Fl.reshape(-1, 3)
+            if not np.isfinite(uvs[verts]).all():          # a closed part (``_append_closed``)
+                ch = PathsChart(Vs[verts], Fl, verts, faces)
+                if ch.paths_k is None:
+                    raise ConformalError(
+                        f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles) is closed and too large "
+                        "for surface paths: mark seams that cut it open, or use sphere mode",
+                        'no_boundary', 'mark_seams')
+                self.chart_of_split[verts] = c
+                self.local_of_split[verts] = np.arange(len(verts))
+                self.charts.append(ch)
+                continue
             try:
                 ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, self.error_target, mu_mode)
             except ConformalError as exc:
@@ -1224,6 +1296,8 @@ class GeodesicSolver:
             self.local_of_split[verts] = np.arange(len(verts))
             self.charts.append(ch)
         for ch in self.charts:
+            if isinstance(ch, PathsChart):
+                continue
             ch.paths_k = paths_choice(ch, method, grid, mu_mode)
             if ch.paths_k:                      # a token grid: the island is answered by paths
                 ch.size, ch.limit, ch.nodes = GRID_MIN, None, float(GRID_MIN) ** 2
@@ -1337,8 +1411,6 @@ class GeodesicSolver:
             ch = self.charts[c]
             loc = self.local_of_split[src_split[self.chart_of_split[src_split] == c]]
             mine = self.face_island[pf] == c
-            S_uv = np.concatenate([ch.uv[loc], np.einsum('kc,kcd->kd', pb[mine], ch.uv[ch.F[np.searchsorted(
-                ch.faces, pf[mine])]])]) if mine.any() else ch.uv[loc]
             src_faces = np.searchsorted(ch.faces, pf[mine]) if mine.any() else np.zeros(0, np.int64)
             # rows of X_src of this chart's sources, in S_uv's order (a refined seed must not claim
             # vertices that another source is nearer to)
@@ -1353,6 +1425,8 @@ class GeodesicSolver:
                 dist_s[ch.verts] = d
                 reached += 1
                 continue
+            S_uv = np.concatenate([ch.uv[loc], np.einsum('kc,kcd->kd', pb[mine], ch.uv[ch.F[src_faces]])]) \
+                if mine.any() else ch.uv[loc]
             d, r, nm, _, nf = self._march_chart(ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius,
                                                 calibrate, own=own)
             refined += nf
@@ -1384,7 +1458,7 @@ class GeodesicSolver:
         dist[~self.on_mesh] = np.nan
         t_sample = time.perf_counter() - t
         G = max((self.charts[c] for c in active), key=lambda ch: ch.size)
-        ny, nx = G.grid.shape
+        ny, nx = G.grid.shape if G.size else (0, 0)
         # the error estimate of each reached chart, at the median distance of this query
         ests = []
         for c in active:
@@ -1414,7 +1488,8 @@ class GeodesicSolver:
                         'total': total + sum(self.seconds.values())})
         report = dict(self.report)
         report.update({
-            'grid': [ny, nx], 'cell': G.grid.h, 'masked_fraction': float(1 - G.grid.inside.mean()),
+            'grid': [ny, nx], 'cell': G.grid.h if G.size else None,
+            'masked_fraction': float(1 - G.grid.inside.mean()) if G.size else None,
             'solver': self.solver, 'sources': int(len(X_src)),
             'seed_radius': float(min(radii)) if radii else None,
             'on_mesh': hybrid, 'refined_sources': refined, 'marches': marches,
@@ -1729,10 +1804,11 @@ def geodesic_distance(V: np.ndarray, F: np.ndarray, sources=None, points=None, u
                       boundary: str = 'uniform', grid: int | None = None, solver: str = 'auto',
                       mu_mode: str = 'metric', source_radius: float | None = None, calibrate: bool = True,
                       progress=None, seams: np.ndarray | None = None, clamp: bool = True,
-                      error_target: float = ERROR_TARGET) -> tuple[np.ndarray, dict]:
+                      error_target: float = ERROR_TARGET, method: str = 'auto') -> tuple[np.ndarray, dict]:
     """Geodesic distances from a set of sources to every vertex, by fast marching on the conformal
-    plane: ``GeodesicSolver(V, F, uv, boundary, grid, solver, mu_mode, seams, error_target).distance(
-    sources, points, source_radius, calibrate, clamp)``, for one query. V (n,3), F (m,3).
+    plane or surface paths: ``GeodesicSolver(V, F, uv, boundary, grid, solver, mu_mode, seams,
+    error_target, method=method).distance(sources, points, source_radius, calibrate, clamp)``, for one
+    query. V (n,3), F (m,3).
 
     Returns ``(dist, report)``: ``dist`` (n,) float64 in mesh units (NaN at vertices in no triangle,
     inf on islands without a source); ``report`` as ``GeodesicSolver.distance``, with the set-up's
@@ -1741,7 +1817,8 @@ def geodesic_distance(V: np.ndarray, F: np.ndarray, sources=None, points=None, u
     V, F = _check_mesh_arrays(V, F)
     _parse_sources(len(V), len(F), sources, points)                   # validate before any work
     gs = GeodesicSolver(V, F, uv=uv, boundary=boundary, grid=grid, solver=solver, mu_mode=mu_mode,
-                        seams=seams, error_target=error_target, progress=lambda f, m: say(0.4 * f, m))
+                        seams=seams, error_target=error_target, progress=lambda f, m: say(0.4 * f, m),
+                        method=method)
     return gs.distance(sources, points, source_radius=source_radius, calibrate=calibrate, clamp=clamp,
                        progress=lambda f, m: say(0.4 + 0.6 * f, m))
 
