@@ -962,7 +962,8 @@ def unresolved_faces(mu_face: np.ndarray, edge: np.ndarray, h: float) -> np.ndar
 # charts: one flat grid per island
 def closed_parts(F, count, face_island):
     """(count,) bool: the connected parts (``face_island`` (m,) of the triangles ``F`` (m,3)) that have
-    no boundary edge (an edge of one triangle only)."""
+    no boundary edge (an edge of one triangle only). Edges are counted undirected, unlike
+    ``core.mesh.topology.twin_halfedges``, so a part with inconsistent orientation is not opened."""
     from ..mesh.topology import halfedges
     H = np.sort(halfedges(F), axis=1)
     _, inv, cnt = np.unique(H, axis=0, return_inverse=True, return_counts=True)

@@ -1,5 +1,6 @@
-"""Geodesic distances on a closed genus-0 mesh through its conformal sphere map (docs/math.md,
-"Sphere mode"): fast marching on two overlapping stereographic charts.
+"""Geodesic distances on a closed genus-0 mesh (docs/math.md, "Sphere mode"; docs/geodesic.md, "Sphere
+mode"): shortest surface paths (``core.geodesic.paths``) where they fit their memory budget, else fast
+marching on two overlapping stereographic charts of its conformal sphere map.
 """
 import time
 
@@ -254,8 +255,8 @@ def default_sphere_grid(n_vertices):
 
 def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver='auto',
                     overlap=GEO_OVERLAP_DEG, source_radius=8.0, progress=None, method='auto'):
-    """Geodesic distances on a closed genus-0 mesh by fast marching through its conformal sphere, and
-    by shortest surface paths where the sphere's charts cannot resolve the surface.
+    """Geodesic distances on a closed genus-0 mesh: shortest surface paths whenever they fit their
+    memory budget, else fast marching through its conformal sphere (``method``, below).
 
     V (n,3), F (m,3); ``sources`` vertex indices (k,) (the result is the distance to the nearest).
     ``S`` (n,3): a sphere map to reuse (from ``sphere_map``); None computes one with ``moebius`` if
