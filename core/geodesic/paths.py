@@ -6,8 +6,9 @@ extrapolation from ``k`` and ``(k - 1) / 2`` points per edge removes most of the
 
 ``steiner_distances``: the paths from source vertices or a point, on any set of triangles (the
 planar solver's refined seed uses it on a window around the source). ``surface_paths``: the
-distances on a whole mesh at the largest ``k`` its size allows in ``PATH_BUDGET`` graph links, with
-the error estimate (sphere mode's answer where its charts do not resolve the surface).
+distances on a whole mesh (or island) at a given ``k`` (``path_points``: the largest that fits a
+number of graph links), with the error estimate; sphere mode, the planar solver's small coarse
+islands and its closed parts use it.
 """
 import numpy as np
 
@@ -73,8 +74,8 @@ def _steiner_graph(V, F, src=None, X=None, src_faces=None, k=STEINER):
 
 def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapolate=False, excess=False):
     """Shortest paths on the surface of the triangles ``F`` (m,3) (vertices ``V`` (n,3)) from source
-    vertices ``src`` (an index or (s,) indices: the distance to the nearest) or a point ``X`` (3,) in
-    the triangles ``src_faces``, through ``k`` Steiner points on
+    vertices ``src`` (an index or (s,) indices: the distance to the nearest) and/or surface points
+    ``X`` in ``src_faces`` (as ``_steiner_graph``), through ``k`` Steiner points on
     every edge: a graph joining every pair of points (vertices and Steiner points) on the boundary of
     each triangle by the straight segment inside it. Each graph path is a path on the surface, so the
     distances are upper bounds of the geodesic ones, and tend to them as ``k`` grows (docs/geodesic.md,
@@ -132,11 +133,12 @@ def path_links(n_faces, n_edges, k):
     return n_faces * (3 * k * k + 3 * k) + n_edges * (k + 1)
 
 
-def path_points(n_faces, n_edges, budget=None):
-    """The largest ``k`` of ``PATH_K`` whose graph and Richardson's coarse one, ``(k - 1) / 2`` points
-    per edge, fit in ``budget`` links (None: ``PATH_BUDGET``); None if none does."""
+def path_points(n_faces, n_edges, budget=None, k_min=PATH_K[-1], k_max=PATH_K[0]):
+    """The largest odd ``k`` in ``k_min..k_max`` (default: ``PATH_K``) whose graph and Richardson's
+    coarse one, ``(k - 1) / 2`` points per edge, fit in ``budget`` links (None: ``PATH_BUDGET``); None
+    if none does."""
     budget = PATH_BUDGET if budget is None else budget
-    for k in PATH_K:
+    for k in range(k_max if k_max % 2 else k_max - 1, k_min - 1, -2):
         if path_links(n_faces, n_edges, k) + path_links(n_faces, n_edges, (k - 1) // 2) <= budget:
             return k
     return None
@@ -168,11 +170,9 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
         if target is None or estimate <= target:
             return dv, estimate, k
         want = k * (estimate / (0.8 * target)) ** (1.0 / STEINER_ORDER)
-        k_new = min(int(np.ceil(want)) | 1, k_max)
         from ..mesh.topology import unique_edges
-        ne = len(unique_edges(F)[0])
-        while k_new > k and path_links(len(F), ne, k_new) + path_links(len(F), ne, k_new // 2) > PATH_BUDGET:
-            k_new -= 2
-        if k_new <= k:
+        k_new = path_points(len(F), len(unique_edges(F)[0]), k_min=k + 2,
+                            k_max=min(int(np.ceil(want)) | 1, k_max))
+        if k_new is None:
             return dv, estimate, k
         k, target = k_new, None

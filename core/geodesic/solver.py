@@ -56,7 +56,7 @@ import numpy as np
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
-from .paths import (PATH_BUDGET, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, path_links, path_points,
+from .paths import (PATH_BUDGET, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, path_points,
                     steiner_distances, surface_paths)
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
@@ -1027,18 +1027,14 @@ def paths_choice(ch, method, grid, mu_mode):
     if method == 'paths':
         return path_points(m, ne) or PATH_K[-1]
     marches = 1 + (METRIC_PASSES if mu_mode == 'metric' else 0)
-    allow = min(PATH_BUDGET, PATH_COST * ch.nodes * marches)
-    k = PATH_K[0]
-    if path_links(m, ne, k) + path_links(m, ne, k // 2) > allow:
+    k = path_points(m, ne, min(PATH_BUDGET, PATH_COST * ch.nodes * marches), PATH_K[0], PATH_K_MAX)
+    if k is None:
         # a grid held at the cap short of the target: the paths at the largest k that fits, if their
         # expected error is under half the grid's estimate
         kb = path_points(m, ne)
         if ch.limit == 'cap' and kb is not None and ch.grid_estimate is not None \
                 and PATH_ERROR_9 * (PATH_K[0] / kb) ** STEINER_ORDER < 0.5 * ch.grid_estimate:
             return kb
-        return None
-    while k + 2 <= PATH_K_MAX and path_links(m, ne, k + 2) + path_links(m, ne, (k + 2) // 2) <= allow:
-        k += 2
     return k
 
 
@@ -1197,7 +1193,7 @@ class GeodesicSolver:
     optional callback. ``method``: 'grid' marches on every chart; 'paths' answers every island by
     shortest surface paths through Steiner points (``core.geodesic.paths.surface_paths``, at least
     ``PATH_K[-1]`` points per edge); 'auto' (default) takes the paths on an island where they are
-    cheaper than the grid its error target needs (``paths_cheaper``: small, coarse islands whose map
+    cheaper than the grid its error target needs (``paths_choice``: small, coarse islands whose map
     varies a lot, where the grid grows large and still misses, such as suzanne's), else the grid.
     Raises ``ConformalError``.
 
