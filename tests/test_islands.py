@@ -384,3 +384,54 @@ def test_extreme_scale_is_warned():
     assert any('extreme scale variation' in w for w in res.islands[0]['warnings'])
     cut = unwrap(V, F, boundary='area')                      # auto: cut, uniform density
     assert cut.report['mu_ratio_worst'] > 0.5 and not cut.report['warnings']
+
+
+def _two_bumps():
+    """Two bump disks (n = 17) side by side: two islands, so ``unwrap`` takes the island path."""
+    from core import make_surface
+    V, F = make_surface('bump', 17)
+    return np.vstack([V, V + [5.0, 0, 0]]), np.vstack([F, F + len(V)]), V, F
+
+
+def test_a_kept_retry_gets_the_certified_bound_once(monkeypatch):
+    """Retries (here: the area map after a uniform map made to report an overlap) make no bound of
+    their own; the kept retry's bound is made afterwards and equals the map's own certificate."""
+    import core.atlas.islands as isl
+    from core import flatten
+    V2, F2, V, F = _two_bumps()
+    calls = []
+    real = isl._flatten_island
+
+    def fake(Vi, Fi, loops, holes, boundary, desc, progress, options):
+        calls.append((boundary, bool(options.get('bound'))))
+        uv, rep = real(Vi, Fi, loops, holes, boundary, desc, progress, options)
+        if boundary == 'uniform':
+            rep['overlaps'] = 1
+        return uv, rep
+    monkeypatch.setattr(isl, '_flatten_island', fake)
+    r = isl.unwrap(V2, F2, boundary='uniform', bound=True)
+    assert calls == [('uniform', True), ('area', False)] * 2
+    want = flatten(V, F, boundary='uniform', bound=True).report['bound_vertex']
+    assert 0.8 < want < 1
+    for rep in r.islands:
+        assert rep['boundary_used'] == 'area'
+        assert rep['bound_vertex'] == pytest.approx(want, rel=1e-9)
+
+
+def test_no_area_retry_when_the_uniform_map_already_is_the_area_map(monkeypatch):
+    """A uniform attempt whose optimiser fell back to the area map (it folds) is not followed by the
+    same area map again."""
+    import core.atlas.islands as isl
+    V2, F2, _, _ = _two_bumps()
+    calls = []
+    real = isl._flatten_island
+
+    def fake(Vi, Fi, loops, holes, boundary, desc, progress, options):
+        calls.append(boundary)
+        uv, rep = real(Vi, Fi, loops, holes, boundary, desc, progress, options)
+        rep['flips'], rep['fallback'] = 1, 'area'
+        return uv, rep
+    monkeypatch.setattr(isl, '_flatten_island', fake)
+    r = isl.unwrap(V2, F2, boundary='uniform', bound=True)
+    assert calls.count('area') == 0
+    assert all(rep['bound_vertex'] is not None for rep in r.islands)

@@ -351,12 +351,24 @@ def _describe(i, n_isl, faces, tri_poly):
     return f"island {i + 1} of {n_isl} ({len(faces)} triangles, e.g. {what})"
 
 
+def _filled(V, F, loops):
+    """The island ``V`` (n,3), ``F`` (m,3) with every hole of ``loops`` but the outer one capped
+    (``fill_holes``): (Vf, Ff, real (mf,) bool: the island's own triangles, or None without holes,
+    info of the caps)."""
+    if len(loops) <= 1:
+        return V, F, None, []
+    Vf, Ff, info = fill_holes(V, F, loops)
+    real = np.zeros(len(Ff), bool)
+    real[:len(F)] = True             # fill triangles come after the island's own (fill_holes)
+    return Vf, Ff, real, info
+
+
 def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
     """Flatten one island (local ``V`` (n,3), ``F`` (m,3), its boundary ``loops``) with holes filled
     virtually (``holes`` 'fill') or, if it has one loop, as it is. Returns (uv (n,2) in mesh units with
     UV area = 3D area, report dict with the measures, ``overlaps`` and ``warnings``)."""
     from ..disk.flatten import flatten
-    n, m = len(V), len(F)
+    n = len(V)
     rep = {'loops': len(loops)}
     if not loops:
         raise ConformalError(f"{desc} is closed (it has no boundary)", 'no_boundary', 'mark_seams')
@@ -365,22 +377,19 @@ def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
     if genus > 0:
         raise ConformalError(f"{desc} has genus {genus} (Euler characteristic {chi} with {len(loops)} "
                              f"boundary loop(s))", 'genus', 'cut_handles')
-    Vf, Ff = V, F
-    if len(loops) > 1:
-        if holes == 'error':
-            raise ConformalError(f"{desc} has {len(loops)} boundary loops (an outer boundary and "
-                                 f"{len(loops) - 1} hole(s))", 'holes', 'fill_holes')
-        Vf, Ff, info = fill_holes(V, F, loops)
+    if len(loops) > 1 and holes == 'error':
+        raise ConformalError(f"{desc} has {len(loops)} boundary loops (an outer boundary and "
+                             f"{len(loops) - 1} hole(s))", 'holes', 'fill_holes')
+    Vf, Ff, real, info = _filled(V, F, loops)
+    if info:
         rep['holes'] = {'mode': 'fill', 'filled': len(info),
                         'fill_vertices': sum(h['fill_vertices'] for h in info),
                         'fill_faces': sum(h['fill_faces'] for h in info),
                         'hole_loop_vertices': [h['loop_vertices'] for h in info]}
-    real = np.zeros(len(Ff), bool)
-    real[:m] = True                  # fill triangles come after the island's own (fill_holes)
     # the certified bound (a linear program) costs far more than the map on real islands: only on
     # request (bound=True in the options)
     res = flatten(Vf, Ff, boundary=boundary, fit='true_scale', max_faces=None, progress=progress,
-                  real_faces=real if len(Ff) > m else None, **{'bound': False, **options})
+                  real_faces=real, **{'bound': False, **options})
     uv = res.uv[:n]
     a_uv = signed_uv_areas(uv, F).sum()
     if not a_uv > 0:
@@ -473,20 +482,26 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=
     else:
         modes = ['cut' if _hole_geometry_prefers_cut(V, F, loops) else 'fill']
     first_error = None
+    inputs = {}                      # id(report) -> the (V, F, loops) that candidate flattened
 
-    def attempt(mode, bnd):
+    def attempt(mode, bnd, retry=False):
+        """Flatten in hole ``mode`` with boundary ``bnd``. A ``retry`` makes no certified bound (a
+        linear program): it is made once, for the map kept, if that is a retry's."""
         nonlocal first_error
+        opts = {**options, 'bound': False} if retry else options
         try:
             if mode == 'fill':
                 uv, rep = _flatten_island(V, F, loops, 'fill' if holes == 'cut' else holes, bnd, desc,
-                                          progress, options)
+                                          progress, opts)
                 cand = (everything, F, ident, uv, rep)
+                inputs[id(rep)] = (V, F, loops)
             else:
                 Fc, vo, lc, info = _cut_island(V, F, loops)
-                uv, rep = _flatten_island(V[vo], Fc, lc, holes, bnd, desc, progress, options)
+                uv, rep = _flatten_island(V[vo], Fc, lc, holes, bnd, desc, progress, opts)
                 rep['holes'] = info
                 rep['loops_before_cut'] = len(loops)
                 cand = (everything, Fc, vo, uv, rep)
+                inputs[id(rep)] = (V[vo], Fc, lc)
             rep['boundary_used'] = bnd
             cands.append(cand)
         except ConformalError as exc:
@@ -501,16 +516,25 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=
         attempt(mode, boundary)
     if not clean() and len(modes) == 1 and len(loops) > 1 and holes != 'error':
         # the requested hole mode overlaps or folds: try the other one too and keep the better
-        attempt('fill' if modes[0] == 'cut' else 'cut', boundary)
+        attempt('fill' if modes[0] == 'cut' else 'cut', boundary, retry=True)
     if not clean() and boundary == 'uniform':
-        # the optimiser watches flips, not overlaps: the area map (u_B = 0) may be one-to-one
-        for mode in dict.fromkeys(c[4].get('holes', {}).get('mode', 'fill') for c in cands) or ['fill']:
-            attempt(mode, 'area')
+        # the optimiser watches flips, not overlaps: the area map (u_B = 0) may be one-to-one. Not in
+        # a hole mode whose uniform map already is the area map (the optimiser fell back to it
+        # because it folds): the same map again
+        for mode in dict.fromkeys(c[4].get('holes', {}).get('mode', 'fill') for c in cands
+                                  if c[4].get('fallback') != 'area') or ([] if cands else ['fill']):
+            attempt(mode, 'area', retry=True)
     if not cands:
         raise first_error
     cands.sort(key=lambda c: _score(c[4]))
     best = cands[0]
     rep = best[4]
+    if options.get('bound') and 'bound_vertex' not in rep:
+        # the kept map is a retry's: its certificate now (the same system, so the same value)
+        from ..disk.flatten import certified_bound
+        Vb, Fb, lb = inputs[id(rep)]
+        Vf, Ff, real, _ = _filled(Vb, Fb, lb)
+        rep['bound_vertex'], _ = certified_bound(Vf, Ff, rep['operators']['mode'], real)
     if best[4]['boundary_used'] != boundary:
         rep['fallback_boundary'] = (f"the {boundary} map overlapped or folded in every hole mode; the "
                                     f"{rep['boundary_used']} map is used")

@@ -357,7 +357,7 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
                   'boundary_vertices': int(len(loop)), 'operators': {'mode': operators, 'intrinsic': False},
                   'solver': None,
                   'planar': 'the mesh lies in a plane: its own coordinates are the map (no solve)'}
-        if boundary == 'uniform' and (bound or (bound is None and len(F) <= AUTO_BOUND_FACES)):
+        if bound or (bound is None and boundary == 'uniform' and len(F) <= AUTO_BOUND_FACES):
             report['bound_vertex'] = 1.0
         frames, A = local_frames(V, F)
         return _measured(report, uv, None if boundary == 'free' else np.zeros(len(V)), F, None, A,
@@ -457,6 +457,16 @@ def planar_map(V, F, tol=PLANAR_TOL):
     if a.sum() < 0:
         P[:, 1], a = -P[:, 1], -a
     return P if (a > 0).all() else None
+
+
+def certified_bound(V, F, operators, real_faces=None):
+    """The certified vertex bound that ``flatten(V, F, bound=True)`` reports for a map made with
+    ``operators`` (the ``mode`` of its ``report['operators']``: 'auto', 'intrinsic' or 'extrinsic'),
+    computed on its own: for a caller that made several maps and wants the certificate of the one it
+    keeps (``unwrap``'s retries). The same system as that map's, so the same value. ``V`` (n,3),
+    ``F`` (m,3) a disk, ``real_faces`` as in ``flatten``. Returns (value or None, note or None)."""
+    r = _flatten(V, F, 'area', 'true_scale', None, True, None, real_faces, operators).report
+    return r.get('bound_vertex'), r.get('bound_note')
 
 
 def _bound(system, mask):
