@@ -63,6 +63,7 @@ SOLVERS = ('auto', 'skfmm', 'sweep')
 METHODS = ('auto', 'grid', 'paths')
 PATH_ERROR_9 = 7e-4  # expected mean error of the paths at k = 9 (measured 0.02-0.07 %; falls as k^-1.85)
 PATH_COST = 2.0      # 'auto': surface paths where their links are at most this many per grid node update
+CUT_PATH_BUDGET = 3_000_000  # links for a part the flattening cut (suzanne's face: k = 29, 2.8M links)
 MU_MODES = ('metric', 'vertex', 'face')
 GRID_MIN, GRID_MAX = 64, 4096
 GRID_AUTO_MIN = 256          # the automatic grid never goes below this (nodes along the longer side)
@@ -972,6 +973,39 @@ def closed_parts(F, count, face_island):
     return ~open_part
 
 
+def _fits_paths(F):
+    """True if surface paths fit their budget on the triangles ``F`` (m,3) (``path_points``)."""
+    from ..mesh.topology import unique_edges
+    return path_points(len(F), len(unique_edges(F)[0])) is not None
+
+
+def _cut_parts(V, Fo, shut, part, Fs, island, count, reports=()):
+    """(count,) bool: the open parts (``part`` (m,) of the input triangles; ``shut`` the closed ones,
+    ``Fo`` (mo,3) the others' triangles) that the flattening cut beyond the repair of the mesh (which
+    splits non-manifold vertices and edges, ``core.mesh.repair``: the surface every answer is on), on
+    ``Fs`` (mo,3) split vertex ids and ``island`` (mo,) islands: a hole cut open, an overlapping map
+    split (more islands or more split vertices than the repaired part has), or an island's map that
+    still folds or overlaps itself (``reports``: the islands' reports, with ``flips`` and
+    ``overlaps``); and small enough for surface paths, which answer them uncut."""
+    from ..mesh.repair import repair
+    from ..mesh.topology import face_components
+    po = part[~shut[part]]
+    R = repair(V, Fo)
+    pr = po[R.face_map]                                       # part of each repaired triangle
+    _, comp = face_components(R.F, len(R.V))
+    n_isl = np.bincount(np.unique(np.c_[po, island], axis=0)[:, 0], minlength=count)
+    n_isl_rep = np.bincount(np.unique(np.c_[pr, comp], axis=0)[:, 0], minlength=count)
+    n_split = np.bincount(np.unique(np.c_[np.repeat(po, 3), Fs.ravel()], axis=0)[:, 0], minlength=count)
+    n_rep = np.bincount(np.unique(np.c_[np.repeat(pr, 3), R.F.ravel()], axis=0)[:, 0], minlength=count)
+    cut = (n_isl > n_isl_rep) | (n_split > n_rep)
+    bad = np.array([r.get('flips', 0) + r.get('overlaps', 0) > 0 for r in reports], bool)
+    if bad.any():
+        cut[np.unique(po[bad[island]])] = True
+    for p in np.flatnonzero(cut):
+        cut[p] = _fits_paths(Fo[po == p])
+    return cut
+
+
 def _append_closed(F, shut, part, vert_of, Fs, uvs, face_island, n):
     """The split arrays of the open parts (``vert_of`` (N,), ``Fs``, ``uvs`` (N,2), ``face_island`` over
     the open triangles in input order) extended by the closed parts ``shut`` (count,) bool (``part``
@@ -994,14 +1028,21 @@ def _append_closed(F, shut, part, vert_of, Fs, uvs, face_island, n):
 
 
 class PathsChart:
-    """A closed part of the mesh, answered by surface paths only (no flat chart, no grid): ``verts``
-    (k,) split vertices, ``V`` (k,3), ``F`` (mi,3) local triangles, ``faces`` (mi,) input triangles,
-    ``paths_k`` the Steiner points per edge (``path_points``; None if the part is too large)."""
+    """A part of the mesh answered by surface paths only (no flat chart, no grid): a closed part, or an
+    open one the flattening had to cut (``_cut_parts``). ``verts`` (k,) split vertices, ``V`` (k,3),
+    ``F`` (mi,3) local triangles, ``faces`` (mi,) input triangles, ``paths_k`` the Steiner points per
+    edge (``path_points``; None if the part is too large). ``budget``: for a cut part, the links that
+    buy it more points, up to ``PATH_K_MAX`` (``CUT_PATH_BUDGET``: as many as the cost test of
+    ``paths_choice`` bought such islands when they were cut charts), if that is more than 9."""
 
-    def __init__(self, V, F, verts, faces):
+    def __init__(self, V, F, verts, faces, budget=None):
         from ..mesh.topology import unique_edges
         self.V, self.F, self.verts, self.faces = V, F, verts, faces
-        self.paths_k = path_points(len(F), len(unique_edges(F)[0]))
+        m, ne = len(F), len(unique_edges(F)[0])
+        self.paths_k = path_points(m, ne)
+        if budget is not None:
+            self.paths_k = max(self.paths_k or 0, path_points(m, ne, budget, PATH_K[-1], PATH_K_MAX) or 0) \
+                or None
         self.size, self.limit, self.nodes, self.metric_passes = 0, None, 0.0, 0
 
     def rasterise(self, mu_mode):
@@ -1222,6 +1263,7 @@ class GeodesicSolver:
         self.V, self.F = V, F
         self.on_mesh = np.zeros(self.n, bool)
         self.on_mesh[F.ravel()] = True
+        cut_face = np.zeros(len(F), bool)              # triangles of parts answered uncut (``_cut_parts``)
         report = {'mu_mode': mu_mode, 'error_target': self.error_target}
         seconds = {}
         if uv is not None:
@@ -1249,22 +1291,48 @@ class GeodesicSolver:
                 vert_of, Fs, uvs, face_island = np.zeros(0, np.int64), Fo, np.zeros((0, 2)), \
                     np.zeros(0, np.int64)
             elif count == 1 and seams is None and self.on_mesh.all() and len(boundary_loops(F, self.n)) == 1:
+                from ..atlas.islands import boundary_crossings
                 from ..disk.flatten import flatten
                 res = flatten(V, F, boundary=boundary, fit='true_scale', bound=False)
                 vert_of, Fs, uvs = np.arange(self.n), F, res.uv
                 report['mu_ratio'] = res.report.get('mu_ratio')
+                folded = res.report['flips'] + boundary_crossings(res.uv, boundary_loops(F, self.n)) > 0
+                if folded and method != 'grid' and _fits_paths(F):
+                    # the map overlaps itself (a ramp of more than a turn): no grid can hold it
+                    shut[:] = cut_face[:] = True
+                    report['cut_parts'] = 1
+                    vert_of, Fs, uvs, face_island = np.zeros(0, np.int64), Fo[:0], np.zeros((0, 2)), \
+                        np.zeros(0, np.int64)
+                elif folded:
+                    report['folded_chart'] = True
             else:
                 from ..atlas.islands import unwrap
+                # holes filled virtually (a hole cut open would be a wall the distances cannot cross)
                 res = unwrap(V, Fo, seams=seams, boundary=boundary, fit='true_scale', pack=False,
-                             allow_loose=True)
-                vert_of, Fs, uvs = res.vert_of, res.F, res.uv
-                face_island = res.face_island
+                             allow_loose=True, holes='fill')
+                cut = _cut_parts(V, Fo, shut, part, res.F, res.face_island, count, res.islands) \
+                    if seams is None and method != 'grid' else np.zeros(count, bool)
+                if cut.any():
+                    # parts the flattening cut all the same (a filled map that overlapped is split,
+                    # a non-manifold vertex is split): surface paths on the whole part instead
+                    shut |= cut
+                    Fo = F[~shut[face_island]]
+                    if len(Fo):
+                        res = unwrap(V, Fo, seams=None, boundary=boundary, fit='true_scale', pack=False,
+                                     allow_loose=True, holes='fill')
+                report['cut_parts'] = int(cut.sum())
+                cut_face = cut[part]
+                if len(Fo):
+                    vert_of, Fs, uvs, face_island = res.vert_of, res.F, res.uv, res.face_island
+                else:
+                    vert_of, Fs, uvs, face_island = np.zeros(0, np.int64), Fo, np.zeros((0, 2)), \
+                        np.zeros(0, np.int64)
             if shut.any():
                 vert_of, Fs, uvs, face_island = _append_closed(F, shut, part, vert_of, Fs, uvs, face_island,
                                                                self.n)
             count = int(face_island.max()) + 1
             report['boundary'] = boundary
-            report['closed_parts'] = int(shut.sum())
+            report['closed_parts'] = int(shut.sum()) - report.get('cut_parts', 0)
             seconds['flatten'] = time.perf_counter() - t0
         say(0.3, 'rasterising')
         t = time.perf_counter()
@@ -1282,8 +1350,8 @@ class GeodesicSolver:
             Fg = self.Fs[faces]
             verts, Fl = np.unique(Fg, return_inverse=True)
             Fl = Fl.reshape(-1, 3)
-            if not np.isfinite(uvs[verts]).all():          # a closed part (``_append_closed``)
-                ch = PathsChart(Vs[verts], Fl, verts, faces)
+            if not np.isfinite(uvs[verts]).all():          # a closed or cut part (``_append_closed``)
+                ch = PathsChart(Vs[verts], Fl, verts, faces, CUT_PATH_BUDGET if cut_face[faces[0]] else None)
                 if ch.paths_k is None:
                     raise ConformalError(
                         f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles) is closed and too large "
@@ -1482,6 +1550,10 @@ class GeodesicSolver:
             warnings.append("a source lies where the grid does not resolve the surface (its cell is larger "
                             "than the triangles there): distances come from the under-resolved grid; use a "
                             "larger grid, or a more uniform map (cones, seams)")
+        if self.report.get('folded_chart'):
+            warnings.append("the flat map of the mesh folds or overlaps itself, so one grid cannot hold it: "
+                            "distances may cross between its layers; use method='auto' (surface paths) "
+                            "or seams that cut it into pieces that lie flat")
         if filled:
             warnings.append(f"{filled} vertices lie in UV slivers thinner than a grid cell: their distances "
                             "are edge paths from their neighbours (an upper bound); use a larger grid")
