@@ -985,8 +985,9 @@ def _cut_parts(V, Fo, shut, part, Fs, island, count, reports=()):
     splits non-manifold vertices and edges, ``core.mesh.repair``: the surface every answer is on), on
     ``Fs`` (mo,3) split vertex ids and ``island`` (mo,) islands: a hole cut open, an overlapping map
     split (more islands or more split vertices than the repaired part has), or an island's map that
-    still folds or overlaps itself (``reports``: the islands' reports, with ``flips`` and
-    ``overlaps``); and small enough for surface paths, which answer them uncut."""
+    still overlaps itself (``reports``: the islands' reports, with ``overlaps``; a few flipped
+    triangles only disturb the grid locally); and small enough for surface paths, which answer them
+    uncut."""
     from ..mesh.repair import repair
     from ..mesh.topology import face_components
     po = part[~shut[part]]
@@ -998,7 +999,7 @@ def _cut_parts(V, Fo, shut, part, Fs, island, count, reports=()):
     n_split = np.bincount(np.unique(np.c_[np.repeat(po, 3), Fs.ravel()], axis=0)[:, 0], minlength=count)
     n_rep = np.bincount(np.unique(np.c_[np.repeat(pr, 3), R.F.ravel()], axis=0)[:, 0], minlength=count)
     cut = (n_isl > n_isl_rep) | (n_split > n_rep)
-    bad = np.array([r.get('flips', 0) + r.get('overlaps', 0) > 0 for r in reports], bool)
+    bad = np.array([r.get('overlaps', 0) > 0 for r in reports], bool)
     if bad.any():
         cut[np.unique(po[bad[island]])] = True
     for p in np.flatnonzero(cut):
@@ -1296,9 +1297,10 @@ class GeodesicSolver:
                 res = flatten(V, F, boundary=boundary, fit='true_scale', bound=False)
                 vert_of, Fs, uvs = np.arange(self.n), F, res.uv
                 report['mu_ratio'] = res.report.get('mu_ratio')
-                folded = res.report['flips'] + boundary_crossings(res.uv, boundary_loops(F, self.n)) > 0
+                folded = boundary_crossings(res.uv, boundary_loops(F, self.n)) > 0
                 if folded and method != 'grid' and _fits_paths(F):
-                    # the map overlaps itself (a ramp of more than a turn): no grid can hold it
+                    # the map overlaps itself (a ramp of more than a turn): no grid can hold it (a few
+                    # flipped triangles only disturb it locally: they keep the grid)
                     shut[:] = cut_face[:] = True
                     report['cut_parts'] = 1
                     vert_of, Fs, uvs, face_island = np.zeros(0, np.int64), Fo[:0], np.zeros((0, 2)), \
@@ -1551,7 +1553,7 @@ class GeodesicSolver:
                             "than the triangles there): distances come from the under-resolved grid; use a "
                             "larger grid, or a more uniform map (cones, seams)")
         if self.report.get('folded_chart'):
-            warnings.append("the flat map of the mesh folds or overlaps itself, so one grid cannot hold it: "
+            warnings.append("the flat map of the mesh overlaps itself, so one grid cannot hold it: "
                             "distances may cross between its layers; use method='auto' (surface paths) "
                             "or seams that cut it into pieces that lie flat")
         if filled:
