@@ -138,3 +138,39 @@ def box(n=10, size=(2.0, 1.0, 0.3)):
     out = ((V[F].mean(1) - V.mean(0)) * N).sum(1) < 0
     F[out] = F[out][:, ::-1]
     return V, F
+
+
+def voxels(filled, k=4):
+    """Boundary surface of a set of unit voxels ``filled`` (nx,ny,nz) bool, each square face a k x k
+    grid of cells split in two triangles, welded and outward: ``V``, ``F``."""
+    filled = np.asarray(filled, bool)
+    t = np.linspace(0.0, 1.0, k + 1)
+    a, b = np.meshgrid(t, t, indexing='ij')
+    P = np.stack([a.ravel(), b.ravel()], 1)
+    i, j = np.meshgrid(np.arange(k), np.arange(k), indexing='ij')
+    q = (i * (k + 1) + j).ravel()
+    Fq = np.r_[np.stack([q, q + k + 1, q + k + 2], 1), np.stack([q, q + k + 2, q + 1], 1)]
+    pad = np.pad(filled, 1)
+    Vs, Fs = [], []
+    for ax in range(3):
+        u, v = [d for d in range(3) if d != ax]
+        for sgn in (-1, 1):
+            empty = ~np.roll(pad, -sgn, axis=ax)[1:-1, 1:-1, 1:-1]
+            for c in np.argwhere(filled & empty):
+                Q = np.repeat(c[None].astype(float), len(P), 0)
+                Q[:, ax] += sgn > 0
+                Q[:, u] += P[:, 0]
+                Q[:, v] += P[:, 1]
+                Fs.append(Fq + len(Vs) * len(P))
+                Vs.append(Q)
+    V, F = np.concatenate(Vs), np.concatenate(Fs)
+    _, first, inv = np.unique(np.round(V * 4 * k).astype(np.int64), axis=0, return_index=True,
+                              return_inverse=True)
+    V, F = V[first], inv.ravel()[F]
+    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    probe = np.floor(V[F].mean(1) + 0.25 * N / np.linalg.norm(N, axis=1, keepdims=True)).astype(int)
+    ok = (probe >= 0).all(1) & (probe < filled.shape).all(1)
+    inward = np.zeros(len(F), bool)
+    inward[ok] = filled[tuple(probe[ok].T)]
+    F[inward] = F[inward][:, ::-1]
+    return V, F

@@ -83,6 +83,8 @@ CORNER_MARGIN = 0.15              # a cone's corners are kept this far below pi 
 WEDGE_MAX = 2 * np.pi - 0.2        # a wedge of the cut disk above this gets split by another branch
 SPARSE_LAMBDA = 0.1                # the L2 start's penalty weight (times 1/n; sparse_curvature)
 SPARSE_ITERS = 15                  # reweighting rounds of the L2 start
+TOP_UPS = 2                        # automatic mode: re-placements with a raised estimate when the
+TOP_UP_MARGIN = 0.02               # layout misses the target (``cone_unwrap``)
 ALT_MARGIN = 0.02                  # another placement is laid out when its estimate beats the realised
                                    # ratio of the best clean layout by this much
 SPARSE_POOL = 3                    # the L2 start places SPARSE_POOL times the cones, then thins them
@@ -1934,6 +1936,23 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         tried += [dict(c, angles=f"{c['angles']} ({len(S2)} cones, bounds {bounds})") for c in tried2]
         if best2 is not None and (best is None or best2[0] > best[0]):
             best, S = best2, S2
+    aim = target_ratio
+    for _ in range(TOP_UPS if cones is None and target_ratio is not None and n <= BIG_MESH else 0):
+        # automatic mode: the layout realises less than the placement's estimate promised, so the
+        # target is missed; place again for an estimate raised by the shortfall (more cones), and keep
+        # that if its layout is clean and better
+        if best is None or not best[0][0] or best[0][2] >= target_ratio or len(S) >= int(max_cones):
+            break
+        aim = min(aim + (target_ratio - best[0][2]) + TOP_UP_MARGIN, 0.99)
+        S2, k2, h2 = place_cones(system, aim, int(max_cones), sweeps,
+                                 progress=lambda f, msg: report_progress(0.05 + 0.6 * f, msg))
+        S2, k2 = _drop_weak(system, S2, k2)
+        if len(S2) <= len(S):
+            break
+        best2, tried2 = lay_out(S2, k2)
+        tried += [dict(c, angles=f"{c['angles']} ({len(S2)} cones, top-up for {aim:.3f})") for c in tried2]
+        if best2 is not None and best2[0] > best[0]:
+            best, S, history = best2, S2, h2
     timings['layout'] = time.perf_counter() - t_lay - timings['cut']
     if best is None:
         raise ConformalError(f"no layout of the cut disk could be built: {tried[0]['error']}",
