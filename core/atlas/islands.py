@@ -545,6 +545,17 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=
     if rep['flips'] + rep['overlaps'] == 0 or len(F) < 4:
         rep['warnings'] = _island_warnings(rep)
         return [best]
+    if rep['overlaps'] and not rep['flips']:
+        # a map that overlaps itself without folding (a ramp of more than a turn): its own charts,
+        # split along shortest interior paths and glued back where they do not overlap, keep the map
+        pieces = _chart_pieces(V, best, poly)
+        if pieces is not None:
+            note = (f"the map overlapped itself ({rep['overlaps']} boundary crossing(s)): split into "
+                    f"{len(pieces)} charts along shortest paths")
+            for p in pieces:
+                p[4]['split_from_overlap'] = note
+                p[4]['warnings'] = _island_warnings(p[4])
+            return pieces
     if (rep['flips'] or rep['overlaps'] or not rep['qc_mean'] <= QC_WARN) and depth < 4:
         # triangles that fold or collapse in every mode (a fold of the surface itself), and the
         # triangles on boundary edges that cross (e.g. at a pinch where two holes touch): detach them
@@ -602,6 +613,42 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=
         return pieces
     rep['warnings'] = _island_warnings(rep)
     return [best]
+
+
+def _chart_pieces(V, cand, poly):
+    """The candidate map ``cand`` (faces, Fc, vert_of, uv, report; ``_solve_island``) of the island
+    with local positions ``V`` split into charts that do not overlap (``core.atlas.cones.
+    split_overlaps``: cuts along shortest interior paths between the arcs that cross, then glued back
+    where the union does not overlap), each keeping its coordinates (the same conformal map), or None
+    if crossings remain, a chart folds, or a polygon of ``poly`` (m,) would be split between charts.
+    Returns a list of pieces as ``_solve_island``."""
+    from .cones import split_overlaps
+    faces, Fc, vo, uv, _ = cand
+    none = np.zeros((0, 2), np.int64)
+    cut = cut_along_seams(Fc, len(vo), none)
+    uvc = np.zeros((len(cut.vert_of), 2))
+    uvc[cut.F.ravel()] = uv[Fc.ravel()]
+    cut, uvc, _, left, _ = split_overlaps(V[vo], Fc, cut, uvc, none)
+    if left or cut.n_islands < 2:
+        return None
+    pp = poly[faces]
+    if (np.bincount(np.unique(np.c_[pp, cut.face_island], axis=0)[:, 0]) > 1).any():
+        return None
+    pieces = []
+    for i in range(cut.n_islands):
+        fi = np.flatnonzero(cut.face_island == i)
+        used, Fp = np.unique(cut.F[fi], return_inverse=True)
+        Fp = Fp.reshape(-1, 3)
+        uvp = uvc[used] - uvc[used].mean(0)
+        pv = vo[cut.vert_of[used]]
+        ok = ~degenerate_faces(V[pv], Fp)
+        r = {'loops': 1, **uv_measures(V[pv], Fp[ok], uvp),
+             'overlaps': boundary_crossings(uvp, topology.boundary_loops(Fp, len(pv))), 'warnings': []}
+        r['flips'] += int((signed_uv_areas(uvp, Fp[~ok]) < 0).sum())
+        if r['flips'] or r['overlaps']:
+            return None
+        pieces.append((faces[fi], Fp, pv, uvp, r))
+    return pieces
 
 
 def _single_triangle(V, tri):

@@ -229,6 +229,9 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
     disk, loops = (False, None) if cones is not None else _plain_disk(Vs, Fs, Ss, max_faces)
     if disk and edges is not None and whole and loose_edge_count(edges, F):
         disk = False                     # the island pipeline lists the loose edges it ignores
+    flat = _disk(Vs, Fs, loops, boundary, fit, max_faces, progress, options) if disk else None
+    if flat is not None and flat[2]['overlaps'] and not flat[2]['flips']:
+        disk = False          # the map overlaps itself: the island pipeline splits it into charts
     if cones is not None:
         fixed = repair(Vs, Fs)                  # messy input: the same internal repairs as islands
         zero = degenerate_faces(fixed.V, fixed.F)
@@ -258,7 +261,7 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
                    'seam_fraction': _seam_fraction(V, F, auto_seams), 'repairs': fixed.repairs,
                    **{k: meas[k] for k in MEASURE_KEYS}}
     elif disk:
-        uv_s, mu_s, rep = _disk(Vs, Fs, loops, boundary, fit, max_faces, progress, options)
+        uv_s, mu_s, rep = flat
         uv_corner_s = uv_s[Fs]
         F_uv_s, ok, isl = Fs, np.ones(len(Fs), bool), np.zeros(len(Fs), np.int64)
         islands = [rep]
