@@ -831,3 +831,21 @@ def test_an_overlapping_chart_is_answered_by_surface_paths():
     # method='grid' keeps the chart and says it folds
     _, rep_g = geo.GeodesicSolver(V, F, method='grid').distance(sources=[s])
     assert any('overlaps itself' in w for w in rep_g['warnings'])
+
+
+def test_reversed_faces_do_not_matter():
+    """A scan with a few faces wound the wrong way (ten reversed at random) gives the distances of the
+    clean mesh: the solver turns them as the repair does (it used to stop with 'flipped triangles').
+    A point source in a reversed face, with its barycentric coordinates in that face's own corner
+    order, is the same surface point."""
+    from core import make_surface
+    V, F = make_surface('bump', 33)
+    G = F.copy()
+    k = np.random.default_rng(1).choice(len(F), 10, replace=False)
+    G[k] = G[k][:, ::-1]
+    f = int(k[0])
+    b = np.array([0.2, 0.3, 0.5])
+    d_clean, _ = geo.GeodesicSolver(V, F).distance(sources=[5], points=(np.array([f]), b[None]))
+    d_rev, rep = geo.GeodesicSolver(V, G).distance(sources=[5], points=(np.array([f]), b[None, ::-1]))
+    assert not rep['warnings']
+    assert np.allclose(d_rev, d_clean, rtol=1e-9, atol=1e-12)

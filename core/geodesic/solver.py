@@ -973,6 +973,21 @@ def closed_parts(F, count, face_island):
     return ~open_part
 
 
+def _oriented(V, F):
+    """``F`` (m,3) with the triangles that the mesh repair turns (``core.mesh.repair``: faces that
+    disagree with their neighbours, per part) turned the same way: a distance does not depend on a
+    triangle's winding, but its flat chart needs the one orientation (a few reversed faces in a
+    scan used to stop the solver with 'flipped triangles'). Unchanged if none is turned."""
+    from ..mesh.repair import repair
+    R = repair(V, F)
+    if not R.flipped.any():
+        return F
+    F = F.copy()
+    turn = R.face_map[R.flipped]
+    F[turn] = F[turn][:, ::-1]
+    return F
+
+
 def _fits_paths(F):
     """True if surface paths fit their budget on the triangles ``F`` (m,3) (``path_points``)."""
     from ..mesh.topology import unique_edges
@@ -1264,6 +1279,7 @@ class GeodesicSolver:
         self.V, self.F = V, F
         self.on_mesh = np.zeros(self.n, bool)
         self.on_mesh[F.ravel()] = True
+        self.turned = None                             # (m,) faces turned to one orientation, or None
         cut_face = np.zeros(len(F), bool)              # triangles of parts answered uncut (``_cut_parts``)
         report = {'mu_mode': mu_mode, 'error_target': self.error_target}
         seconds = {}
@@ -1279,6 +1295,9 @@ class GeodesicSolver:
             report['boundary'] = 'given'
         else:
             from ..mesh.topology import face_components
+            F2 = _oriented(V, F)
+            self.turned = None if F2 is F else (F2 != F).any(1)
+            F = self.F = F2
             count, face_island = face_components(F, self.n)
             # closed parts (no boundary edge) have no flat chart: without seams, surface paths answer
             # them on the closed surface (``method`` 'grid' keeps the error that asks for seams)
@@ -1466,6 +1485,8 @@ class GeodesicSolver:
         if not source_radius >= 1.0:
             raise ConformalError("source_radius must be at least 1 grid cell")
         s, pf, pb = _parse_sources(self.n, self.m, sources, points)
+        if len(pf) and self.turned is not None:
+            pb = np.where(self.turned[pf, None], pb[:, ::-1], pb)        # the corners of turned faces
         if len(s) and not self.on_mesh[s].all():
             raise ConformalError(f"source vertex {int(s[~self.on_mesh[s]][0])} is in no triangle")
         is_src = np.isin(self.vert_of, s)                       # split copies of the source vertices
