@@ -560,3 +560,20 @@ def test_warnings_name_each_problem():
     assert sphere_warnings(ok) == []
     w = sphere_warnings(dict(ok, flips=3, qc_mean=1.7, moebius_converged=False))
     assert len(w) == 3 and '3 of 100' in w[0] and '1.7' in w[1] and 'Moebius' in w[2]
+
+
+def test_reversed_faces_are_turned_not_refused():
+    """A closed scan with a few faces wound the wrong way maps (and measures distances) as the clean
+    mesh does: the faces are turned as the repair turns them and the report lists it (it used to be
+    refused with 'recalculate normals')."""
+    from meshgen import uv_sphere
+    from core.sphere.geodesic import sphere_geodesic
+    from core.sphere.map import sphere_map
+    V, F, _ = uv_sphere(12, 24)
+    G = F.copy()
+    k = np.random.default_rng(1).choice(len(F), 6, replace=False)
+    G[k] = G[k][:, ::-1]
+    a, b = sphere_map(V, F), sphere_map(V, G)
+    assert b.report['repairs'][0]['count'] == 6 and b.report['flips'] == 0
+    assert np.allclose(a.S, b.S, atol=1e-9)
+    assert np.allclose(sphere_geodesic(V, G, [3])[0], sphere_geodesic(V, F, [3])[0], rtol=1e-9)

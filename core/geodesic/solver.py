@@ -973,21 +973,6 @@ def closed_parts(F, count, face_island):
     return ~open_part
 
 
-def _oriented(V, F):
-    """``F`` (m,3) with the triangles that the mesh repair turns (``core.mesh.repair``: faces that
-    disagree with their neighbours, per part) turned the same way: a distance does not depend on a
-    triangle's winding, but its flat chart needs the one orientation (a few reversed faces in a
-    scan used to stop the solver with 'flipped triangles'). Unchanged if none is turned."""
-    from ..mesh.repair import repair
-    R = repair(V, F)
-    if not R.flipped.any():
-        return F
-    F = F.copy()
-    turn = R.face_map[R.flipped]
-    F[turn] = F[turn][:, ::-1]
-    return F
-
-
 def _fits_paths(F):
     """True if surface paths fit their budget on the triangles ``F`` (m,3) (``path_points``)."""
     from ..mesh.topology import unique_edges
@@ -1295,7 +1280,8 @@ class GeodesicSolver:
             report['boundary'] = 'given'
         else:
             from ..mesh.topology import face_components
-            F2 = _oriented(V, F)
+            from ..mesh.repair import oriented_faces
+            F2 = oriented_faces(V, F)
             self.turned = None if F2 is F else (F2 != F).any(1)
             F = self.F = F2
             count, face_island = face_components(F, self.n)

@@ -200,3 +200,17 @@ def zero_area_note(count: int) -> dict:
     return {'repair': 'zero_area_faces_mollified', 'count': int(count),
             'note': 'zero-area triangles get a valid intrinsic metric (mollification) and are left out '
                     'of the measures'}
+
+
+def oriented_faces(V, F):
+    """``F`` (m,3) with the triangles that ``repair`` turns (faces that disagree with their neighbours,
+    per part) turned the same way, in the input's numbering: for answers that do not depend on a
+    triangle's winding (geodesic distances) but need one orientation to be computed. Returns ``F``
+    itself if no triangle is turned, else a copy."""
+    R = repair(V, F)
+    if not R.flipped.any():
+        return F
+    F = np.array(F, np.int64)
+    turn = R.face_map[R.flipped]
+    F[turn] = F[turn][:, ::-1]
+    return F

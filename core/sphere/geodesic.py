@@ -290,6 +290,10 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     t0 = time.perf_counter()
     V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64)
+    if S is None:
+        # a distance does not depend on a triangle's winding: faces wound the wrong way are turned
+        from ..mesh.repair import oriented_faces
+        F = oriented_faces(V, F)
     n = len(V)
     src = np.atleast_1d(np.asarray(sources))
     if src.size == 0:

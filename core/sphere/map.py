@@ -75,7 +75,7 @@ from ..mesh.measures import summarise
 from .moebius import MOEBIUS_MODES, optimise
 from ..mesh.solve import Factor
 from ..mesh import topology
-from ..mesh.validate import check_mesh, DEFAULT_MAX_FACES
+from ..mesh.validate import check_arrays, check_mesh, DEFAULT_MAX_FACES
 
 
 @dataclass
@@ -385,9 +385,14 @@ def sphere_map(V: np.ndarray, F: np.ndarray, moebius: str = 'uniform', max_faces
         raise ConformalError(f"unknown Moebius mode {moebius!r}: use one of {', '.join(MOEBIUS_MODES)}")
     report_progress = progress or (lambda f, msg: None)
     t0 = time.perf_counter()
+    V, F0 = check_arrays(V, F, max_faces=max_faces)
+    # faces wound the wrong way are turned (the map is per vertex; the sphere needs one orientation)
+    from ..mesh.repair import oriented_faces
+    F = oriented_faces(V, F0)
     check_mesh(V, F, kind='sphere', max_faces=max_faces)
     V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64)
+    turned = int((F != F0).any(1).sum()) if F is not F0 else 0
     timings = {'check': time.perf_counter() - t0}
     t = time.perf_counter()
     S, info = conformal_sphere(V, F, progress=lambda f, m: report_progress(0.5 * f, m))
@@ -409,6 +414,9 @@ def sphere_map(V: np.ndarray, F: np.ndarray, moebius: str = 'uniform', max_faces
         if k in minfo:
             report['moebius_' + k if k != 'baselines' else k] = minfo[k]
     report.update({k: v for k, v in info.items()})
+    if turned:
+        report['repairs'] = [{'repair': 'faces_reoriented', 'count': turned,
+                              'note': 'faces turned to agree with their neighbours'}]
     report['warnings'] = sphere_warnings(report)
     timings['total'] = time.perf_counter() - t0
     report['seconds'] = {k: round(v, 4) for k, v in timings.items()}
