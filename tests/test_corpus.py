@@ -234,3 +234,17 @@ def test_zero_area_faces_with_automatic_seams():
     assert res.report['flips'] == 0 and res.report['overlaps'] == 0
     assert np.isfinite(res.uv_corner).all()
     assert np.isnan(res.mu[0]) and np.isfinite(np.delete(res.mu, 0)).all()
+
+
+def test_reversed_faces_are_reported_as_mirrored():
+    """Triangles wound against their neighbours are flattened in the repaired orientation, so their UVs
+    read mirrored against their own (reversed) normals: the summary's flips count them and a warning
+    says why and what to do (there was a flip count and no warning)."""
+    from core import make_surface
+    from core.atlas.unwrap import unwrap as core_unwrap
+    V, F = make_surface('bump', 17)
+    F = F.copy()
+    F[[3, 40, 100]] = F[[3, 40, 100]][:, ::-1]
+    r = core_unwrap(V, F, boundary='area')
+    assert r.report['flips'] == 3 and all(i['flips'] == 0 for i in r.islands)
+    assert any('3 triangle(s) are wound against their neighbours' in w for w in r.warnings)

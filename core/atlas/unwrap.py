@@ -315,6 +315,12 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         r['warnings'] = island_warnings(r, desc) + [f"{desc}: {w}" for w in r.get('warnings', [])
                                                      if cones is not None]
         warnings += r['warnings']
+    mirrored = summary.get('flips', 0) - sum(r.get('flips', 0) for r in islands if 'error' not in r)
+    if mirrored > 0:
+        # the islands are clean in the repaired orientation: these triangles are wound against their
+        # neighbours in the input, so their UVs read mirrored against their own normals
+        warnings.append(f"{mirrored} triangle(s) are wound against their neighbours (their normals point "
+                        "the other way): their UVs are mirrored; recalculate normals")
     path = 'cones' if cones is not None else 'disk' if disk else 'islands'
     summary.update({'path': path, 'boundary': boundary, 'fit': fit,
                     'holes': holes, 'island_scale': island_scale, 'triangles': int(m),
