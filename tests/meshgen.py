@@ -115,29 +115,8 @@ def needle_mesh(eps, name='bump', n=9):
 def box(n=10, size=(2.0, 1.0, 0.3)):
     """Closed box [0,sx] x [0,sy] x [0,sz], each face an n x n grid of cells split in two triangles
     (a thin box has sliver triangles on its sides): ``V`` (k,3), ``F`` (m,3), outward."""
-    t = np.linspace(0.0, 1.0, n + 1)
-    a, b = np.meshgrid(t, t, indexing='ij')
-    P = np.stack([a.ravel(), b.ravel()], 1)
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing='ij')
-    q = (i * (n + 1) + j).ravel()
-    Fq = np.r_[np.stack([q, q + n + 1, q + n + 2], 1), np.stack([q, q + n + 2, q + 1], 1)]
-    Vs, Fs = [], []
-    for ax in range(3):
-        u, v = [k for k in range(3) if k != ax]
-        for side in (0.0, 1.0):
-            Q = np.zeros((len(P), 3))
-            Q[:, u], Q[:, v], Q[:, ax] = P[:, 0], P[:, 1], side
-            Fs.append(Fq + len(Vs) * len(P))
-            Vs.append(Q)
-    V = np.concatenate(Vs)
-    F = np.concatenate(Fs)
-    _, first, inv = np.unique(np.round(V * 4 * n).astype(np.int64), axis=0, return_index=True,
-                              return_inverse=True)
-    V, F = V[first] * np.asarray(size, float), inv.ravel()[F]
-    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    out = ((V[F].mean(1) - V.mean(0)) * N).sum(1) < 0
-    F[out] = F[out][:, ::-1]
-    return V, F
+    V, F = voxels(np.ones((1, 1, 1), bool), n)
+    return V * np.asarray(size, float), F
 
 
 def voxels(filled, k=4):
