@@ -1320,8 +1320,8 @@ class GeodesicSolver:
                 cut = _cut_parts(V, Fo, shut, part, res.F, res.face_island, count, res.islands) \
                     if seams is None and method != 'grid' else np.zeros(count, bool)
                 if cut.any():
-                    # parts the flattening cut all the same (a filled map that overlapped is split,
-                    # a non-manifold vertex is split): surface paths on the whole part instead
+                    # parts the flattening cut all the same (a filled map that overlapped and was split
+                    # into charts, or halved): surface paths on the whole part instead
                     shut |= cut
                     Fo = F[~shut[face_island]]
                     if len(Fo):
