@@ -7,8 +7,8 @@ Rows per mesh: ``cone_unwrap`` with exactly N cones (``target_ratio=None, max_co
 (``target_ratio=0.5``); the BFF-style greedy anchor (a cone at the vertex of largest |u| with u equal
 at the cones, re-solve, repeat: L2 flavour, no moves, BFF's angles) laid out by the same cut and
 layout; xatlas's charts (if the ``xatlas`` package is installed; benchmarks only). Every row is
-measured per triangle with core.mesh.measures: mu_ratio (min/max), p1/p99 (area-weighted, the
-acceptance measure, and by count), the vertex-level p1/p99 of the cones' u, qc_mean, flips; 'cross'
+measured per triangle with core.mesh.measures: mu_ratio (min/max), p1/p99 (area-weighted and by
+count, DESIGN section 3; the placement scores the worse of the two), the vertex-level p1/p99 of the cones' u, qc_mean, flips; 'cross'
 counts boundary self-crossings of the cut disk (0 with 0 flips: no overlap). 'charts' counts the
 pieces of the layout (an overlapping cut disk is split, then glued back where the pieces do not
 overlap: ``split_overlaps``, ``merge_charts``). 'seam' is the cut's length (chart splits included) as a

@@ -13,8 +13,8 @@ columns of the cones are ever computed (one solve each with the one factorisatio
 Pipeline of ``cone_unwrap``:
 
 1. placement (``place_cones``): a look-ahead greedy (the most extreme vertices of ``u`` screened in
-   one batch, the best scored by the area-weighted 1%/99% spread of the per-triangle scale with
-   bounded area-L2 angles, ``ConeSystem.l2_angles``) and BFF's greedy, each under two sets of
+   one batch, the best scored by the 1%/99% spread of the per-triangle scale (the worse of its
+   per-triangle and area-weighted readings, ``face_spread``) with bounded area-L2 angles, ``ConeSystem.l2_angles``) and BFF's greedy, each under two sets of
    curvature bounds (``L2_BOUNDS``, ``WIDE_BOUNDS``), and the L2 start (a nearly sparse curvature,
    ``sparse_curvature``, its peaks thinned by backward elimination, ``eliminate``); then cone moves
    over 3-rings (``move_cones``). ``L`` is the intrinsic Delaunay Laplacian.
@@ -22,7 +22,7 @@ Pipeline of ``cone_unwrap``:
    cones and the boundary, pruned and straightened. A wedge over ``2*pi`` (a negative cone) gets a
    new branch through its middle (``through_corner``).
 3. layout of the cut disk for several angle sets on the same cones (area-L2, L-inf with floors,
-   BFF's, corrections for the exact metric); the best realised area-weighted p1/p99 without flips,
+   BFF's, corrections for the exact metric); the best realised p1/p99 (the worse reading) without flips,
    squashed triangles or overlap is kept. The layout is the exact flat cone metric (Newton on the
    discrete conformal equation on the cut disk's intrinsic Delaunay triangulation, one log scale per
    surface vertex, so both sides of a seam have equal lengths and differ by a rigid motion) unfolded
@@ -359,10 +359,17 @@ class ConeSystem:
 
 
 def face_spread(F, A, u, q=1.0):
-    """Area-weighted q% / (100-q)% spread of the per-triangle log scale (mean of the corners' u):
-    ``exp(p_q - p_{100-q})``, the vertex-level estimate of the realised ``p1/p99`` (q = 1)."""
-    lo, hi = _weighted_quantiles(u[F].mean(1)[:, None], A, q / 100)
-    return float(np.exp(lo[0] - hi[0]))
+    """The vertex-level estimate of the realised ``p1/p99`` (q = 1) from the log scale ``u`` (n,): the
+    q% / (100-q)% spread ``exp(p_q - p_{100-q})`` of the per-triangle log scale (mean of the corners'
+    u), the worse of its two readings: area-weighted (weights ``A`` (m,)) and per triangle (every
+    triangle counts once, DESIGN section 3). Why both: where the triangles are finer than average
+    (spot's face, cheburashka's ears) the area-weighted tails hide the triangles that hold the
+    extremes of the scale, and a placement scored by area alone left the per-triangle reading 0.05 to
+    0.1 below it (docs/cones.md, "Both readings of p1/p99")."""
+    X = u[F].mean(1)[:, None]
+    lo, hi = _weighted_quantiles(X, A, q / 100)
+    lo1, hi1 = _weighted_quantiles(X, np.ones(len(X)), q / 100)
+    return float(np.exp(min(lo[0] - hi[0], lo1[0] - hi1[0])))
 
 
 def _weighted_quantiles(X, w, q):
@@ -400,11 +407,12 @@ def _weighted_quantiles(X, w, q):
 
 
 def weighted_spread(x, w, q=1.0):
-    """Area-weighted ``q``% / ``(100-q)``% percentile ratio of positive per-triangle values ``x`` (m,)
-    with weights ``w`` (m,) (e.g. the realised scale ``mu`` and the 3D areas): the acceptance measure
-    'p1/p99' of docs/cones.md. NaN entries are ignored."""
+    """Weighted ``q``% / ``(100-q)``% percentile ratio of positive per-triangle values ``x`` (m,) with
+    weights ``w`` (m,) (e.g. the realised scale ``mu`` and the 3D areas: the area-weighted reading of
+    'p1/p99' in docs/cones.md). NaN entries are ignored."""
     ok = np.isfinite(x) & (x > 0)
-    return face_spread(np.arange(ok.sum())[:, None], w[ok], np.log(x[ok]), q)
+    lo, hi = _weighted_quantiles(np.log(x[ok])[:, None], w[ok], q / 100)
+    return float(np.exp(lo[0] - hi[0]))
 
 
 def _score(system, S):
@@ -466,10 +474,12 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
 
 
 def _batch_spread(F, A, U, q=1.0):
-    """Area-weighted q%/(100-q)% spread of the per-triangle scale for each column of ``U`` (n,c):
-    ``face_spread`` of every column at once. Returns (c,)."""
-    lo, hi = _weighted_quantiles(face_means(U, F), A, q / 100)
-    return np.exp(lo - hi)
+    """``face_spread`` of every column of ``U`` (n,c) at once (the worse of the area-weighted and the
+    per-triangle spreads). Returns (c,)."""
+    X = face_means(U, F)
+    lo, hi = _weighted_quantiles(X, A, q / 100)
+    lo1, hi1 = _weighted_quantiles(X, np.ones(len(X)), q / 100)
+    return np.exp(np.minimum(lo - hi, lo1 - hi1))
 
 
 def _screen_moves(system, S, kap, i, cand):
@@ -639,7 +649,7 @@ def eliminate(system, S, count, target_ratio=None, verify=None, report=None):
 
 def move_cones(system, S, kap, best, radius=3, sweeps=2, verify=None, far=0, report=None):
     """Local search over the ``radius``-ring of each cone (MovingCones-style moves, scored by the
-    area-weighted 1%/99% spread of the per-triangle scale with the area-L2 angles re-solved):
+    1%/99% spread of the per-triangle scale, ``face_spread``, with the area-L2 angles re-solved):
     for each cone in turn, every eligible vertex within ``radius`` edges (not next to another cone)
     is screened at once (``_screen_moves``), the ``verify`` best are scored exactly (``_score``) and
     the cone moves to the best one if it beats ``best``. ``S`` list of cone ids, ``kap`` (k,) their
@@ -686,7 +696,7 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
     1. Greedy with a look-ahead: ``candidates`` vertices are tried for the next cone, the most
        extreme of ``u`` at each end (half the highest, half the lowest, outside the cones'
        one-rings); they are screened in one batch (``_screen``) and the best ``VERIFY`` scored by the
-       area-weighted 1%/99% spread of the per-triangle scale (``face_spread``) with the angles
+       1%/99% spread of the per-triangle scale (``face_spread``) with the angles
        re-solved (``l2_angles``); the best is kept. And BFF's greedy (the vertex of largest
        ``|u - u_cone|``; it finds the exact corners of a cube). Each stops when the spread reaches
        ``target_ratio`` (None: never) or at ``max_cones``; the run that reaches the target with fewer
@@ -1668,7 +1678,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                           'qc_mean': me['qc_mean'], 'exact': ev['info']['exact'],
                           'charts': ev['info']['charts']})
             defects = me['flips'] + ev['crossings'] + me['degenerate']
-            key = (defects == 0, -defects, me['mu_ratio_p1_p99_area'])
+            key = (defects == 0, -defects, min(me['mu_ratio_p1_p99'], me['mu_ratio_p1_p99_area']))
             if defects and len(ev['soft']) and (not dirty or key[2] > dirty[0]):
                 dirty[:] = [key[2], ev]
             if best is None or key > best[0]:
@@ -1757,8 +1767,9 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                         f"(s1/s2 > {DEGENERATE_QC:g})")
     if crossings:
         warnings.append(f"the layout overlaps itself ({crossings} boundary crossing(s))")
-    if target_ratio is not None and cones is None and measured['mu_ratio_p1_p99_area'] < target_ratio:
-        warnings.append(f"the area-weighted 1%/99% scale ratio {measured['mu_ratio_p1_p99_area']:.3f} "
+    spread = min(measured['mu_ratio_p1_p99'], measured['mu_ratio_p1_p99_area'])
+    if target_ratio is not None and cones is None and spread < target_ratio:
+        warnings.append(f"the 1%/99% scale ratio {spread:.3f} (the worse of per triangle and area-weighted) "
                         f"is below the target {target_ratio} with {len(S)} cones (max_cones={max_cones})")
     if measured['qc_mean'] > QC_WARN:
         warnings.append(f"the map is not conformal enough: qc_mean {measured['qc_mean']:.3f}")

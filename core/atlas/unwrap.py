@@ -395,7 +395,7 @@ def _cone_part(V, F, cones, target_ratio, max_cones, progress):
         res = cone_unwrap(V, F, cones=None, target_ratio=target_ratio, max_cones=budget, progress=progress)
         r = res.report
         defects = r['flips'] + r['overlaps'] + r.get('degenerate', 0)
-        key = (defects == 0, -defects, r.get('mu_ratio_p1_p99_area', r['mu_ratio_p1_p99']))
+        key = (defects == 0, -defects, min(r['mu_ratio_p1_p99'], r.get('mu_ratio_p1_p99_area', 1.0)))
         if best is None or key > best[0]:
             best = (key, res)
         if defects == 0 or budget <= 4:
