@@ -639,3 +639,30 @@ def test_one_click_tops_up_cones_when_the_layout_misses_the_target():
     rep = cone_unwrap(V, F, target_ratio=0.5).report
     assert rep['flips'] == 0 and rep['overlaps'] == 0 and not rep['warnings']
     assert rep['mu_ratio_p1_p99_area'] >= 0.5 and rep['mu_ratio_p1_p99'] >= 0.5
+
+
+def test_skipped_angle_candidates_could_not_have_won():
+    """Angle candidates whose linear estimate is ``SKIP_MARGIN`` below the best clean layout are not
+    laid out; the rule rests on a layout realising at most about its estimate. On blobs: every
+    candidate laid out realises no more than its estimate plus the margin, and laying out the skipped
+    ones as well (margin infinite) keeps the same layout."""
+    import core.atlas.cones as C
+    for b in (6, 10):
+        V, F = blob(b)
+        r = cone_unwrap(V, F, cones=None, target_ratio=None, max_cones=8)
+        cands = r.report['angle_candidates']
+        kept = min(r.report['mu_ratio_p1_p99'], r.report['mu_ratio_p1_p99_area'])
+        assert any(c.get('skipped') for c in cands)
+        for c in cands:
+            if c.get('skipped'):
+                assert c['estimate'] < kept - C.SKIP_MARGIN
+            else:
+                assert min(c['mu_ratio_p1_p99'], c['mu_ratio_p1_p99_area']) <= c['estimate'] + C.SKIP_MARGIN
+        margin = C.SKIP_MARGIN
+        try:
+            C.SKIP_MARGIN = np.inf
+            full = cone_unwrap(V, F, cones=None, target_ratio=None, max_cones=8)
+        finally:
+            C.SKIP_MARGIN = margin
+        assert not any(c.get('skipped') for c in full.report['angle_candidates'])
+        assert np.array_equal(full.uv, r.uv)
