@@ -8,13 +8,13 @@ Rows per mesh: ``cone_unwrap`` with exactly N cones (``target_ratio=None, max_co
 at the cones, re-solve, repeat: L2 flavour, no moves, BFF's angles) laid out by the same cut and
 layout; xatlas's charts (if the ``xatlas`` package is installed; benchmarks only). Every row is
 measured per triangle with core.mesh.measures: mu_ratio (min/max), p1/p99 (area-weighted and by
-count, DESIGN section 3; the placement scores the worse of the two), the vertex-level p1/p99 of the cones' u, qc_mean, flips; 'cross'
-counts boundary self-crossings of the cut disk (0 with 0 flips: no overlap). 'charts' counts the
-pieces of the layout (an overlapping cut disk is split, then glued back where the pieces do not
-overlap: ``split_overlaps``, ``merge_charts``). 'seam' is the cut's length (chart splits included) as a
-fraction of the total edge length. Published MovingCones p1/p99 (vertex level) for
-comparison: spot 16 cones 0.367, 41 cones 0.615; cheburashka 24 cones 0.383, 53 cones 0.604;
-rocker-arm 8 cones 0.420, 18 cones 0.617.
+count, DESIGN section 3; the placement scores the worse of the two), the vertex-level p1/p99 of
+the cones' u, qc_mean, flips; 'cross' counts boundary self-crossings of the cut disk (0 with 0
+flips: no overlap). 'charts' counts the pieces of the layout (an overlapping cut disk is split,
+then glued back where the pieces do not overlap: ``split_overlaps``, ``merge_charts``). 'seam' is
+the cut's length (chart splits included) as a fraction of the total edge length. Published
+MovingCones p1/p99 (vertex level) for comparison: spot 16 cones 0.367, 41 cones 0.615; cheburashka
+24 cones 0.383, 53 cones 0.604; rocker-arm 8 cones 0.420, 18 cones 0.617.
 
 ``--acceptance``: only the MovingCones rows (spot 16 and 41 cones, cheburashka 24 and 53, rocker-arm 8
 and 18), placed and laid out by ``cone_unwrap``, beside the published figure.

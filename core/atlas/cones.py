@@ -14,8 +14,9 @@ Pipeline of ``cone_unwrap``:
 
 1. placement (``place_cones``): a look-ahead greedy (the most extreme vertices of ``u`` screened in
    one batch, the best scored by the 1%/99% spread of the per-triangle scale (the worse of its
-   per-triangle and area-weighted readings, ``face_spread``) with bounded area-L2 angles, ``ConeSystem.l2_angles``) and BFF's greedy, each under two sets of
-   curvature bounds (``L2_BOUNDS``, ``WIDE_BOUNDS``), and the L2 start (a nearly sparse curvature,
+   per-triangle and area-weighted readings, ``face_spread``) with bounded area-L2 angles,
+   ``ConeSystem.l2_angles``) and BFF's greedy, each under two sets of curvature bounds
+   (``L2_BOUNDS``, ``WIDE_BOUNDS``), and the L2 start (a nearly sparse curvature,
    ``sparse_curvature``, its peaks thinned by backward elimination, ``eliminate``); then cone moves
    over 3-rings (``move_cones``). ``L`` is the intrinsic Delaunay Laplacian.
 2. cut graph (``core.atlas.cutgraph.cut_graph``): 2g homology loops plus a short tree through the
