@@ -424,6 +424,13 @@ def weighted_spread(x, w, q=1.0):
     return float(np.exp(lo[0] - hi[0]))
 
 
+def realised_spread(measured):
+    """The worse of a layout's two readings of its realised p1/p99 (``measured`` or a report dict:
+    'mu_ratio_p1_p99' per triangle, 'mu_ratio_p1_p99_area' area-weighted): the figure ``face_spread``
+    estimates, by which layouts are ranked and targets checked."""
+    return min(measured['mu_ratio_p1_p99'], measured.get('mu_ratio_p1_p99_area', np.inf))
+
+
 def _score(system, S):
     """(spread, kappa): the 1%/99% spread of the per-triangle scale with the area-L2 angles
     (``ConeSystem.l2_angles``) on cones ``S``."""
@@ -1461,12 +1468,13 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
 # ------------------------------------------------------------------------------------------------
 # the public entry point
 # ------------------------------------------------------------------------------------------------
-def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True):
+def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True, u=None):
     """Lay out and measure one set of cone angles on the cut ``seams``: dict with cut, loop, uv (N,2)
     per split vertex (UV area = 3D area), seams, info, measured (``measures_from_jacobians``),
-    crossings (boundary self-crossings) and u (n,)."""
-    u = system.u_of(S, kappa)
-    u -= np.median(u)
+    crossings (boundary self-crossings) and u (n,). ``u`` (n,): the angles' linear log scale
+    (``system.u_of(S, kappa)``) if the caller has it already."""
+    u = system.u_of(S, kappa) if u is None else u
+    u = u - np.median(u)
     cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa, cache=cache,
                                              max_branches=16 if len(Vw) <= BIG_MESH else 4,
                                              Lu=system.L @ u, fac0=system._fac)
@@ -1672,13 +1680,14 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         for label, kap in itertools.chain(cands, corrected(), softened()):
             if big_done():
                 break                                   # big mesh: the first valid layout is kept
-            est = face_spread(Fw, system.A, system.u_of(S, kap))
+            u_lin = system.u_of(S, kap)
+            est = face_spread(Fw, system.A, u_lin)
             if best is not None and best[0][0] and est < best[0][2] - SKIP_MARGIN:
                 # a layout realises at most about its estimate: this one cannot beat the clean best
                 tried.append({'angles': label, 'estimate': est, 'skipped': True})
                 continue
             try:
-                ev = _evaluate(Vw, Fw, system, S, kap, seams0, cache)
+                ev = _evaluate(Vw, Fw, system, S, kap, seams0, cache, u=u_lin)
             except ConformalError as exc:
                 tried.append({'angles': label, 'error': exc.problem})
                 continue
@@ -1690,7 +1699,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                           'qc_mean': me['qc_mean'], 'exact': ev['info']['exact'],
                           'charts': ev['info']['charts']})
             defects = me['flips'] + ev['crossings'] + me['degenerate']
-            key = (defects == 0, -defects, min(me['mu_ratio_p1_p99'], me['mu_ratio_p1_p99_area']))
+            key = (defects == 0, -defects, realised_spread(me))
             if defects and len(ev['soft']) and (not dirty or key[2] > dirty[0]):
                 dirty[:] = [key[2], ev]
             if best is None or key > best[0]:
@@ -1779,7 +1788,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                         f"(s1/s2 > {DEGENERATE_QC:g})")
     if crossings:
         warnings.append(f"the layout overlaps itself ({crossings} boundary crossing(s))")
-    spread = min(measured['mu_ratio_p1_p99'], measured['mu_ratio_p1_p99_area'])
+    spread = realised_spread(measured)
     if target_ratio is not None and cones is None and spread < target_ratio:
         warnings.append(f"the 1%/99% scale ratio {spread:.3f} (the worse of per triangle and area-weighted) "
                         f"is below the target {target_ratio} with {len(S)} cones (max_cones={max_cones})")

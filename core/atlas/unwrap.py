@@ -386,7 +386,7 @@ def _cone_part(V, F, cones, target_ratio, max_cones, progress):
     """One connected part through ``cone_unwrap``: the automatic budget (``cones`` 'auto') keeps the
     best defect-free layout among ``max_cones`` and smaller budgets, since a layout that folds or
     overlaps is worth less than one with fewer cones. Returns ``ConeResult``."""
-    from .cones import cone_unwrap
+    from .cones import cone_unwrap, realised_spread
     if cones != 'auto':
         return cone_unwrap(V, F, cones=None, target_ratio=None, max_cones=int(cones), progress=progress)
     best = None
@@ -395,7 +395,7 @@ def _cone_part(V, F, cones, target_ratio, max_cones, progress):
         res = cone_unwrap(V, F, cones=None, target_ratio=target_ratio, max_cones=budget, progress=progress)
         r = res.report
         defects = r['flips'] + r['overlaps'] + r.get('degenerate', 0)
-        key = (defects == 0, -defects, min(r['mu_ratio_p1_p99'], r.get('mu_ratio_p1_p99_area', 1.0)))
+        key = (defects == 0, -defects, realised_spread(r))
         if best is None or key > best[0]:
             best = (key, res)
         if defects == 0 or budget <= 4:
