@@ -390,8 +390,6 @@ def sphere_map(V: np.ndarray, F: np.ndarray, moebius: str = 'uniform', max_faces
     from ..mesh.repair import oriented_faces
     F = oriented_faces(V, F0)
     check_mesh(V, F, kind='sphere', max_faces=max_faces)
-    V = np.asarray(V, np.float64)
-    F = np.asarray(F, np.int64)
     turned = int((F != F0).any(1).sum()) if F is not F0 else 0
     timings = {'check': time.perf_counter() - t0}
     t = time.perf_counter()
