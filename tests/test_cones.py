@@ -666,3 +666,45 @@ def test_skipped_angle_candidates_could_not_have_won():
             C.SKIP_MARGIN = margin
         assert not any(c.get('skipped') for c in full.report['angle_candidates'])
         assert np.array_equal(full.uv, r.uv)
+
+
+def _corpus(tmp_path, name):
+    """A corpus mesh kept compressed in tests/data/corpus: (V, F)."""
+    import lzma
+    import os
+    from core.io.obj import read_obj
+    path = tmp_path / f'{name}.obj'
+    with lzma.open(os.path.join(os.path.dirname(__file__), 'data', 'corpus', f'{name}.obj.xz')) as src:
+        path.write_bytes(src.read())
+    m = read_obj(str(path))
+    return m.V, m.triangles()[0]
+
+
+def test_big_mesh_with_a_cone_budget_is_placed_like_a_small_one(tmp_path, monkeypatch):
+    """Above ``BIG_MESH`` vertices a fixed cone budget gets the look-ahead greedy and the cone moves
+    (with CHOLMOD), and the placement's own angles are laid out first. rocker-arm (10k vertices) taken
+    as a big mesh at 8 cones: 0.053 per triangle with BFF's greedy alone (the previous big-mesh path),
+    0.381 now (0.450 on the small path, which adds the L2 start and more angle sets)."""
+    import core.atlas.cones as cones
+    V, F = _corpus(tmp_path, 'rocker-arm')
+    monkeypatch.setattr(cones, 'BIG_MESH', 1000)
+    rep = cone_unwrap(V, F, target_ratio=None, max_cones=8).report
+    assert rep['cones'] == 8 and rep['angles'] == 'placement'
+    assert rep['flips'] == 0 and rep['overlaps'] == 0 and rep['degenerate'] == 0
+    assert rep['mu_ratio_p1_p99'] >= 0.35 and rep['mu_ratio_p1_p99_area'] >= 0.35
+
+
+def test_green_columns_are_the_same_when_the_store_is_full(monkeypatch):
+    """``ConeSystem.columns`` keeps at most ``COLUMN_BYTES`` of columns; past that it keeps only the
+    request's and solves the others again when asked: the answers do not change."""
+    import core.atlas.cones as cones
+    V, F = blob(14)
+    system = ConeSystem(V, F)
+    monkeypatch.setattr(cones, 'COLUMN_BYTES', 12 * 8 * system.n)      # room for 12 columns
+    rng = np.random.default_rng(3)
+    for _ in range(8):
+        S = rng.choice(system.n, 5, replace=False).tolist()
+        B = np.zeros((system.n, len(S)))
+        B[S, np.arange(len(S))] = 1.0
+        np.testing.assert_allclose(system.columns(S), system.solve(B), rtol=0, atol=1e-12)
+        assert len(system._cols) <= 12 and system._G.shape[1] <= 12

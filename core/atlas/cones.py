@@ -63,7 +63,8 @@ KAPPA_MAX = 3.5                    # a cone keeps an angle of at least 2*pi - 3.
 KAPPA_MIN = -2.0                   # sharper cones spike u and hurt the realised map (LP bound)
 KAPPA_LEAF = 0.4                   # a cone at a leaf of the cut needs kappa > 0 (one wedge)
 ANGLE_FLOORS = (-2.0, -1.0, 0.1)   # lower bounds of the angle candidates laid out and compared
-BIG_MESH = 20_000                  # above this many vertices: fewer candidates and no cone moves
+BIG_MESH = 20_000                  # above this many vertices: no L2 start, fewer layouts (and the
+                                   # automatic mode: BFF's greedy only, no cone moves)
 DEGENERATE_QC = 1e3                # a layout triangle with s1/s2 above this counts as degenerate
 REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
 MOLLIFY = 1e-4                     # intrinsic mollification of zero-area triangles (relative)
@@ -93,6 +94,7 @@ ALT_MARGIN = 0.02                  # another placement is laid out when its esti
 SKIP_MARGIN = 0.02                 # an angle candidate whose estimate is this far below the realised
                                    # ratio of the best clean layout is not laid out (realised ratios
                                    # stayed within +0.012 of their estimates on every corpus row)
+COLUMN_BYTES = 512 << 20            # the Green's columns kept at most (bytes; ``ConeSystem.columns``)
 SPARSE_POOL = 3                    # the L2 start places SPARSE_POOL times the cones, then thins them
 
 
@@ -196,9 +198,17 @@ class ConeSystem:
             B = np.zeros((self.n, len(new)))
             B[new, np.arange(len(new))] = 1.0
             X = self.solve(B)
+            limit = max(COLUMN_BYTES // (8 * self.n), 2 * len(S))
+            if len(self._cols) + len(new) > limit:
+                # the store is full: keep only this request's columns (the others are solved again if
+                # asked for; a fine mesh's cone moves ask for thousands, each used once)
+                keep = list(dict.fromkeys(s for s in S if s in self._cols))
+                G = np.empty((self.n, min(limit, max(2 * (len(keep) + len(new)), 8))))
+                G[:, :len(keep)] = self._G[:, [self._cols[s] for s in keep]]
+                self._G, self._cols = G, {s: j for j, s in enumerate(keep)}
             k0 = len(self._cols)
-            if k0 + len(new) > self._G.shape[1]:             # grow the store (doubling)
-                G = np.empty((self.n, max(2 * self._G.shape[1], k0 + len(new), 8)))
+            if k0 + len(new) > self._G.shape[1]:             # grow the store (doubling, up to the limit)
+                G = np.empty((self.n, max(min(2 * self._G.shape[1], limit), k0 + len(new), 8)))
                 G[:, :k0] = self._G[:, :k0]
                 self._G = G
             self._G[:, k0:k0 + len(new)] = X
@@ -728,13 +738,15 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
     ones far below it (docs/cones.md); the gap to MovingCones is where the cones are.
     ``system``: ``ConeSystem``; its ``bounds`` is left at the kept run's and ``alternates`` lists the
     other runs' (cones, kappa, bounds), the fallback of ``cone_unwrap``. ``candidates``: per greedy
-    step (default 12; on meshes over ``BIG_MESH`` vertices only BFF's greedy runs, under
-    ``L2_BOUNDS``, without moves). Returns (cones (c,), kappa (c,), history list of (count, spread))."""
+    step (default 12). On meshes over ``BIG_MESH`` vertices the L2 start is not run, and with a
+    target (the automatic mode: time) only BFF's greedy runs, under ``L2_BOUNDS`` (``cone_unwrap``
+    gives it no moves). Returns (cones (c,), kappa (c,), history list of (count, spread))."""
     report = progress or (lambda f, msg: None)
+    quick = system.n > BIG_MESH and target_ratio is not None
     if candidates is None:
-        candidates = 12 if system.n <= BIG_MESH else 0
+        candidates = 0 if quick else 12
     if bounds is None:
-        bounds = (L2_BOUNDS, WIDE_BOUNDS) if system.n <= BIG_MESH else (L2_BOUNDS,)
+        bounds = (L2_BOUNDS,) if quick else (L2_BOUNDS, WIDE_BOUNDS)
     # greedy runs under each bound set; cone moves on every run with a fixed budget (target None),
     # on the best run only in the automatic mode (its time matters more: up to max_cones cones)
     results = []
@@ -1582,7 +1594,9 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         # a planar disk is its own conformal map (u = 0, an isometry): no cone can gain
         S, kappa = np.zeros(0, np.int64), np.zeros(0)
     elif cones is None:
-        S, kappa, history = place_cones(system, target_ratio, int(max_cones), sweeps if n <= BIG_MESH else 0,
+        # big meshes: the automatic mode places by BFF's greedy without moves (time, ``place_cones``)
+        S, kappa, history = place_cones(system, target_ratio, int(max_cones),
+                                        sweeps if n <= BIG_MESH or target_ratio is None else 0,
                                         progress=lambda f, msg: report_progress(0.05 + 0.6 * f, msg))
         if n <= BIG_MESH:
             S, kappa = _drop_weak(system, S, kappa)
@@ -1614,10 +1628,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
             return n > BIG_MESH and best is not None and best[0][0]
 
         def candidates():
-            """Angle sets to lay out: the placement's, L-inf angles with floors, BFF's (lazily: on a
-            big mesh nothing more is computed once a layout is clean)."""
-            if given or not len(S) or n <= BIG_MESH:
-                yield ('given' if given else 'placement'), kappa
+            """Angle sets to lay out after the placement's: L-inf angles with floors, BFF's (lazily: on
+            a big mesh nothing more is computed once a layout is clean)."""
             if given or not len(S):
                 return
             # the cut is fixed by the cones; a leaf of it is one wedge, so its kappa must be positive
@@ -1635,7 +1647,6 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
             if n <= BIG_MESH:
                 yield 'bff', system.dirichlet_angles(S)
 
-        cands = candidates()
         best = None
         tried = []
         cache = {}
@@ -1660,7 +1671,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
             re-solved; up to ``len(SOFT_FLOORS) + 1`` rounds."""
             floors = {}
             ev = dirty[1] if dirty else None
-            for _ in range(len(SOFT_FLOORS) + 1 if not given and len(S) and n <= BIG_MESH else 0):
+            for _ in range(len(SOFT_FLOORS) + 1 if not given and len(S) else 0):
                 # while the best layout is not clean, or a defective one had the better ratio
                 if ev is None or (best[0][0] and best[0][2] >= dirty[0]):
                     return
@@ -1677,7 +1688,12 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                 ev = last['ev'] if last.get('ev') is not None and len(last['ev']['soft']) else None
 
         import itertools
-        for label, kap in itertools.chain(cands, corrected(), softened()):
+        first = [('given' if given else 'placement', kappa)]
+        # a big mesh keeps its first clean layout: the placement's angles, softened where they flip,
+        # before the other sets (a small mesh lays out every set and keeps the best)
+        order = (first, softened(), candidates()) if n > BIG_MESH else \
+            (first, candidates(), corrected(), softened())
+        for label, kap in itertools.chain(*order):
             if big_done():
                 break                                   # big mesh: the first valid layout is kept
             u_lin = system.u_of(S, kap)
