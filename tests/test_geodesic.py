@@ -150,7 +150,10 @@ def test_units_follow_the_mesh_not_the_uv_scale(bump65):
     s = int(sources[0])
     d1, _ = geo.geodesic_distance(V, F, [s], uv=uv, grid=256)
     d3, _ = geo.geodesic_distance(V, F, [s], uv=3.0 * uv + 7.0, grid=256)
-    assert np.allclose(d1, d3, rtol=1e-9, atol=1e-12)
+    # the same grid up to round-off: a vertex exactly on a cell boundary may fall in the next cell
+    # near the source and the seed shifts by 5e-7 (1.2e-6 relative at most on this map); a unit
+    # error would be a factor 3
+    assert np.allclose(d1, d3, rtol=1e-5, atol=1e-12)
     d2, _ = geo.geodesic_distance(2.0 * V, F, [s], uv=uv, grid=256)
     assert np.allclose(d2, 2.0 * d1, rtol=1e-9, atol=1e-12)
 

@@ -251,11 +251,22 @@ def normalise_uv(F, uv, area, fit='true_scale'):
     w, R = np.linalg.eigh(C)
     R = R[:, ::-1]
     # an eigenvector's sign is arbitrary: choose the one with the positive third moment along the
-    # main axis, so that the result does not depend on the order of vertices or faces
+    # main axis, so that the result does not depend on the order of vertices or faces. A shape
+    # symmetric across the second axis has no third moment there (round-off decides its sign): the
+    # second axis's then decides (a half turn), and for a shape symmetric under the half turn, the
+    # first vertex off the second axis (the order of vertices decides between two congruent maps)
     if (wt * (uv @ R[:, 0]) ** 3).sum() < 0:
         R[:, 0] *= -1
     if np.linalg.det(R) < 0:
         R[:, 1] *= -1
+    p = uv @ R
+    m3 = (wt[:, None] * p ** 3).sum(0)
+    tie = np.abs(m3) <= 1e-9 * (wt[:, None] * np.abs(p) ** 3).sum(0)
+    if tie[0]:
+        used = wt > 0
+        off = used & (np.abs(p[:, 0]) > 1e-6 * np.abs(p[used, 0]).max())
+        if (m3[1] < 0) if not tie[1] else (off.any() and p[np.argmax(off), 0] < 0):
+            R = -R
     uv = uv @ R
     if fit == 'true_scale':
         return uv * np.sqrt(area / a.sum())
