@@ -477,7 +477,7 @@ def test_fast_paths_equal_the_plain_computations():
         X = rng.normal(size=(m, 1 + t % 4))
         X = X if t % 2 else np.round(X, 1)                                       # with ties
         w = rng.exponential(size=m) ** (1 + 2 * (t % 3))                         # uneven weights
-        for wt, (lo, hi) in zip((w, np.ones(m)), _weighted_quantiles(X, (w, np.ones(m)), 0.01)):
+        for wt, (lo, hi) in zip((w, np.ones(m)), _weighted_quantiles(X.T.copy(), (w, np.ones(m)), 0.01)):
             for j, x in enumerate(X.T):
                 order = np.argsort(x)
                 c = np.cumsum(wt[order])

@@ -45,7 +45,7 @@ from scipy.optimize import linprog
 from ..disk.flatten import planar_map
 from ..errors import ConformalError
 from ..mesh import topology
-from ..mesh.geometry import angle_sums, face_areas, face_means
+from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.intrinsic import corner_angles as corner_angles_l
 from ..mesh.intrinsic import corner_cotangents as corner_cotangents_l
 from ..mesh.intrinsic import face_areas as face_areas_l
@@ -386,42 +386,44 @@ def face_spread(F, A, u, q=1.0):
 
 
 def _weighted_quantiles(X, weights, q):
-    """The weighted ``q`` and ``1 - q`` quantiles of every column of ``X`` (m,c), for each of the
+    """The weighted ``q`` and ``1 - q`` quantiles of every row of ``X`` (c,m), for each of the
     nonnegative weight vectors ``weights`` (sequence of (m,)): a list of (lo, hi), (c,) each, lo the
     first value in increasing order whose cumulative weight reaches ``q`` of the total, hi the first
-    reaching ``1 - q``.
+    reaching ``1 - q``. (Rows: each sample's values are contiguous, which the partition and the
+    gathers below read along; the numbers are those of the same computation down columns.)
 
     Only the two tails are sorted, once for all the weightings: ``np.argpartition`` picks the ``k``
-    lowest and ``k`` highest values of every column, ``k`` doubled until each tail holds more than
+    lowest and ``k`` highest values of every row, ``k`` doubled until each tail holds more than
     ``q`` of every weighting's total; O(m) instead of a full sort's O(m log m), with the same numbers
     (``face_spread`` runs once per greedy cone on big meshes, ``_batch_spread`` on every screened
     candidate: the full sort took a quarter of a one-click unwrap on small meshes, cheburashka 11 of
     40 s). A tail that would need more than half of the values falls back to the full sort."""
-    m, ncol = X.shape
-    cols = np.arange(ncol)
+    nrow, m = X.shape
+    rows = np.arange(nrow)[:, None]
     totals = [float(w.sum()) for w in weights]
     k = min(m, int(4 * q * m) + 64)
     while 2 * k <= m:
-        part = np.argpartition(X, (k - 1, m - k), axis=0)
-        lo_i, hi_i = part[:k], part[m - k:]
-        if all((w[lo_i].sum(0) > q * t * (1 + 1e-9)).all() and (w[hi_i].sum(0) > q * t * (1 + 1e-9)).all()
+        part = np.argpartition(X, (k - 1, m - k), axis=1)
+        lo_i, hi_i = part[:, :k], part[:, m - k:]
+        if all((w[lo_i].sum(1) > q * t * (1 + 1e-9)).all() and (w[hi_i].sum(1) > q * t * (1 + 1e-9)).all()
                for w, t in zip(weights, totals)):
-            o_lo = np.take_along_axis(lo_i, np.argsort(np.take_along_axis(X, lo_i, 0), axis=0), 0)
-            o_hi = np.take_along_axis(hi_i, np.argsort(-np.take_along_axis(X, hi_i, 0), axis=0), 0)
+            o_lo = np.take_along_axis(lo_i, np.argsort(np.take_along_axis(X, lo_i, 1), axis=1), 1)
+            o_hi = np.take_along_axis(hi_i, np.argsort(-np.take_along_axis(X, hi_i, 1), axis=1), 1)
             out = []
             for w, t in zip(weights, totals):
-                j = (np.cumsum(w[o_lo], axis=0) < q * t).sum(0)       # the first reaching q of the weight
-                j1 = (np.cumsum(w[o_hi], axis=0) <= q * t).sum(0)     # from the top: 1 - q reached
-                out.append((X[o_lo[j, cols], cols], X[o_hi[j1, cols], cols]))
+                j = (np.cumsum(w[o_lo], axis=1) < q * t).sum(1)       # the first reaching q of the weight
+                j1 = (np.cumsum(w[o_hi], axis=1) <= q * t).sum(1)     # from the top: 1 - q reached
+                out.append((X[rows[:, 0], o_lo[rows[:, 0], j]], X[rows[:, 0], o_hi[rows[:, 0], j1]]))
             return out
         k *= 2
-    order = np.argsort(X, axis=0)
+    order = np.argsort(X, axis=1)
     out = []
     for w in weights:
-        c = np.cumsum(w[order], axis=0)
-        c /= c[-1]
-        out.append((X[order[(c < q).sum(0).clip(0, m - 1), cols], cols],
-                    X[order[(c < 1 - q).sum(0).clip(0, m - 1), cols], cols]))
+        c = np.cumsum(w[order], axis=1)
+        c /= c[:, -1:]
+        r = rows[:, 0]
+        out.append((X[r, order[r, (c < q).sum(1).clip(0, m - 1)]],
+                    X[r, order[r, (c < 1 - q).sum(1).clip(0, m - 1)]]))
     return out
 
 
@@ -430,7 +432,7 @@ def weighted_spread(x, w, q=1.0):
     weights ``w`` (m,) (e.g. the realised scale ``mu`` and the 3D areas: the area-weighted reading of
     'p1/p99' in docs/cones.md). NaN entries are ignored."""
     ok = np.isfinite(x) & (x > 0)
-    [(lo, hi)] = _weighted_quantiles(np.log(x[ok])[:, None], [w[ok]], q / 100)
+    [(lo, hi)] = _weighted_quantiles(np.log(x[ok])[None], [w[ok]], q / 100)
     return float(np.exp(lo[0] - hi[0]))
 
 
@@ -502,7 +504,9 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
 def _batch_spread(F, A, U, q=1.0):
     """``face_spread`` of every column of ``U`` (n,c) at once (the worse of the area-weighted and the
     per-triangle spreads). Returns (c,)."""
-    (lo, hi), (lo1, hi1) = _weighted_quantiles(face_means(U, F), (A, np.ones(len(F))), q / 100)
+    Ut = np.ascontiguousarray(U.T)                              # (c,n): the face means row by row
+    M = (Ut[:, F[:, 0]] + Ut[:, F[:, 1]] + Ut[:, F[:, 2]]) / 3.0  # = face_means(U, F).T, to the bit
+    (lo, hi), (lo1, hi1) = _weighted_quantiles(M, (A, np.ones(len(F))), q / 100)
     return np.exp(np.minimum(lo - hi, lo1 - hi1))
 
 
