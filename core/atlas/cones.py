@@ -399,7 +399,7 @@ def _weighted_quantiles(X, weights, q):
     candidate: the full sort took a quarter of a one-click unwrap on small meshes, cheburashka 11 of
     40 s). A tail that would need more than half of the values falls back to the full sort."""
     nrow, m = X.shape
-    rows = np.arange(nrow)[:, None]
+    rows = np.arange(nrow)
     totals = [float(w.sum()) for w in weights]
     k = min(m, int(4 * q * m) + 64)
     while 2 * k <= m:
@@ -413,7 +413,7 @@ def _weighted_quantiles(X, weights, q):
             for w, t in zip(weights, totals):
                 j = (np.cumsum(w[o_lo], axis=1) < q * t).sum(1)       # the first reaching q of the weight
                 j1 = (np.cumsum(w[o_hi], axis=1) <= q * t).sum(1)     # from the top: 1 - q reached
-                out.append((X[rows[:, 0], o_lo[rows[:, 0], j]], X[rows[:, 0], o_hi[rows[:, 0], j1]]))
+                out.append((X[rows, o_lo[rows, j]], X[rows, o_hi[rows, j1]]))
             return out
         k *= 2
     order = np.argsort(X, axis=1)
@@ -421,9 +421,8 @@ def _weighted_quantiles(X, weights, q):
     for w in weights:
         c = np.cumsum(w[order], axis=1)
         c /= c[:, -1:]
-        r = rows[:, 0]
-        out.append((X[r, order[r, (c < q).sum(1).clip(0, m - 1)]],
-                    X[r, order[r, (c < 1 - q).sum(1).clip(0, m - 1)]]))
+        out.append((X[rows, order[rows, (c < q).sum(1).clip(0, m - 1)]],
+                    X[rows, order[rows, (c < 1 - q).sum(1).clip(0, m - 1)]]))
     return out
 
 
@@ -1695,9 +1694,9 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         first = [('given' if given else 'placement', kappa)]
         # a big mesh keeps its first clean layout: the placement's angles, softened where they flip,
         # before the other sets (a small mesh lays out every set and keeps the best)
-        order = (first, softened(), candidates()) if n > BIG_MESH else \
+        sets = (first, softened(), candidates()) if n > BIG_MESH else \
             (first, candidates(), corrected(), softened())
-        for label, kap in itertools.chain(*order):
+        for label, kap in itertools.chain(*sets):
             if big_done():
                 break                                   # big mesh: the first valid layout is kept
             u_lin = system.u_of(S, kap)

@@ -251,10 +251,11 @@ def normalise_uv(F, uv, area, fit='true_scale'):
     w, R = np.linalg.eigh(C)
     R = R[:, ::-1]
     # an eigenvector's sign is arbitrary: choose the one with the positive third moment along the
-    # main axis, so that the result does not depend on the order of vertices or faces. A shape
-    # symmetric across the second axis has no third moment there (round-off decides its sign): the
-    # second axis's then decides (a half turn), and for a shape symmetric under the half turn, the
-    # first vertex off the second axis (the order of vertices decides between two congruent maps)
+    # main axis, so that the result does not depend on the order of vertices or faces. A shape that
+    # is its own mirror image across the second axis has no third moment along the first (round-off
+    # would pick the sign): then the moment along the second axis decides (a half turn), and for a
+    # shape that is its own half turn, the first vertex off the second axis (the order of vertices
+    # decides between two congruent maps)
     if (wt * (uv @ R[:, 0]) ** 3).sum() < 0:
         R[:, 0] *= -1
     if np.linalg.det(R) < 0:
