@@ -2,6 +2,7 @@
 
     .venv/bin/python bench/cones.py [--meshes spot cheburashka cow rocker-arm] [--budgets 4 8 12 16 24]
                                     [--no-anchor] [--no-xatlas] [--no-auto] [--big] [--acceptance]
+                                    [--cuts [spot cow cheburashka]] [--cut-subdivisions 2]
 
 Rows per mesh: ``cone_unwrap`` with exactly N cones (``target_ratio=None, max_cones=N``) and 'auto'
 (``target_ratio=0.5``); the BFF-style greedy anchor (a cone at the vertex of largest |u| with u equal
@@ -15,6 +16,11 @@ then glued back where the pieces do not overlap: ``split_overlaps``, ``merge_cha
 the cut's length (chart splits included) as a fraction of the total edge length. Published
 MovingCones p1/p99 (vertex level) for comparison: spot 16 cones 0.367, 41 cones 0.615; cheburashka
 24 cones 0.383, 53 cones 0.604; rocker-arm 8 cones 0.420, 18 cones 0.617.
+
+``--cuts [names]``: head-like disks cut from spot, cow and cheburashka (``CUTS``), Loop-subdivided
+``--cut-subdivisions`` times (default 2: 28k-64k triangles), at 7, 9 and 10 cones and at the
+``--targets`` ratios (default 0.66 and 0.74, the xatlas goal on the issue's held-out heads): stand-ins
+for the held-out scans, which are not used here.
 
 ``--acceptance``: only the MovingCones rows (spot 16 and 41 cones, cheburashka 24 and 53, rocker-arm 8
 and 18), placed and laid out by ``cone_unwrap``, beside the published figure.
@@ -212,6 +218,38 @@ def corpus_rows(names, budgets, auto=True, n=65):
                   f"{r['flips']} | {r['overlaps']} | {dt:.1f} | {len(res.warnings)} |", flush=True)
 
 
+# head-like disks cut from the public meshes (not the held-out scans): direction, height (mesh units)
+CUTS = {'spot': ((0, 0, 1), 0.546), 'cow': ((1, 0, 0), 3.2), 'cheburashka': ((0, 1, 0), 0.71)}
+
+
+def cut_rows(names, budgets, subdivisions, targets):
+    """Head-like disks (``CUTS``: a plane cut of spot, cow and cheburashka, the largest piece, then
+    ``subdivisions`` steps of Loop's rule, to the size of scanned heads: 28k-64k triangles at 2), as
+    stand-ins for the issue's held-out scans: ``cone_unwrap`` with exactly N cones for each of
+    ``budgets`` and with each of ``targets`` (target_ratio, up to 64 cones; the xatlas goal on the
+    held-out heads is 0.66 and 0.74). Over 20k vertices (cheburashka's at 2) the big-mesh path runs."""
+    from meshes import cut_disk, loop_subdivide
+    print('| mesh (triangles) | method | cones | charts | seam | mu_ratio | p1/p99 (area) | p1/p99 (count) '
+          '| p1/p99 of u | qc_mean | flips | cross | s | |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+    for name in names:
+        got = load(name)
+        if got is None:
+            continue
+        V, F = cut_disk(*got, *CUTS[name])
+        for _ in range(subdivisions):
+            V, F = loop_subdivide(V, F)
+        label = f"{name} cut x{subdivisions} ({len(F)})"
+        for N in list(budgets) + [f't{x}' for x in targets]:
+            t = time.perf_counter()
+            if isinstance(N, str):
+                res = cone_unwrap(V, F, target_ratio=float(N[1:]), max_cones=64)
+            else:
+                res = cone_unwrap(V, F, target_ratio=None, max_cones=N)
+            print(fmt(label, f'target {N[1:]}' if isinstance(N, str) else 'L-inf cones',
+                      row(res, time.perf_counter() - t)), flush=True)
+
+
 def big(extra=False):
     """The speed rows: wall and CPU seconds (CPU: this process, all threads), the stage times of
     ``report['seconds']``, the peak resident memory of the process so far (it only grows from row to
@@ -258,12 +296,20 @@ def main():
     ap.add_argument('--big-extra', action='store_true',
                     help='with --big: also cheburashka, rocker-arm (subdivided once) and cow (twice)')
     ap.add_argument('--acceptance', action='store_true', help='only the MovingCones rows')
+    ap.add_argument('--cuts', nargs='*', default=None,
+                    help='head-like disks cut from the corpus (names from CUTS; none given: all), '
+                         'at --budgets (default here 7 9 10) and --targets')
+    ap.add_argument('--cut-subdivisions', type=int, default=2, help="with --cuts: Loop's steps")
+    ap.add_argument('--targets', nargs='*', type=float, default=[0.66, 0.74], help='with --cuts')
     ap.add_argument('--corpus', nargs='*', default=None,
                     help='the rows of the other corpus meshes and the generated surfaces through '
                          'core.unwrap (names; none given: all of CORPUS_REST and SURFACES)')
     a = ap.parse_args()
     if a.big:
         big(a.big_extra)
+    elif a.cuts is not None:
+        budgets = a.budgets if a.budgets != ap.get_default('budgets') else [7, 9, 10]
+        cut_rows(a.cuts or list(CUTS), budgets, a.cut_subdivisions, a.targets)
     elif a.acceptance:
         table(list(MOVING_CONES), [], False, False, False, per_mesh=MOVING_CONES)
     elif a.corpus is not None:
