@@ -575,6 +575,11 @@ def test_one_click_reaches_its_target_on_cheburashka(tmp_path):
     # was 0.31 when the placement was scored by area alone (cheburashka's ears are finely meshed)
     assert rep['mu_ratio_p1_p99'] >= 0.5 and rep['mu_ratio_p1_p99_area'] >= 0.5
     assert rep['cones'] <= 48 and not rep['warnings']
+    # the moves lifted the greedy's 36 cones past the target by more than TOP_UP_MARGIN: thinned
+    # (34 cones), and the target still holds
+    (moved, spread_moved), (thinned, spread_thinned) = rep['placement'][-2:]
+    assert thinned < moved and spread_moved >= 0.52 and spread_thinned >= 0.52
+    assert rep['cones'] == thinned
 
 
 def test_planar_disk_takes_no_cone():
