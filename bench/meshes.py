@@ -58,8 +58,7 @@ def cut_disk(V, F, direction, height):
     d = np.asarray(direction, np.float64)
     d = d / np.linalg.norm(d)
     keep = F[V[F].mean(1) @ d > height]
-    labels = topology.face_components(keep, len(V))
-    labels = labels[1] if isinstance(labels, tuple) else labels
+    _, labels = topology.face_components(keep, len(V))
     keep = keep[labels == np.bincount(labels).argmax()]
     used = np.unique(keep)
     new = np.full(len(V), -1, np.int64)

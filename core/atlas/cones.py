@@ -804,9 +804,11 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
             # the greedy stopped at the target, and the moves lifted the spread past it (on a fine
             # mesh far past: its greedy is weak): fewer cones reach the target. Thinned while the
             # spread stays TOP_UP_MARGIN above the target, the rest moved once more.
-            S2, k2, b2 = eliminate(system, S, len(S), target_ratio + TOP_UP_MARGIN)
+            def step(f, msg, b=b):
+                report((len(bounds) + b + f) / total, msg)
+            S2, k2, b2 = eliminate(system, S, len(S), target_ratio + TOP_UP_MARGIN, report=step)
             if len(S2) < len(S):
-                S2, k2, b2, _ = move_cones(system, S2, k2, b2, radius=MOVE_RADIUS, sweeps=sweeps)
+                S2, k2, b2, _ = move_cones(system, S2, k2, b2, radius=MOVE_RADIUS, sweeps=sweeps, report=step)
                 r[3] = r[3] + [(len(S2), b2)]
                 r[:3] = [(b2 >= target_ratio, -len(S2) if b2 >= target_ratio else 0, b2), list(S2), k2]
     results.sort(key=lambda r: r[0], reverse=True)
