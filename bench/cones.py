@@ -136,6 +136,14 @@ def fmt(name, label, r, ref=None):
     return '| ' + ' | '.join(cells) + ' |'
 
 
+def header(first, last):
+    """The header of ``fmt``'s rows: ``first`` names the mesh column, ``last`` the reference column."""
+    cells = [first, 'method', 'cones', 'charts', 'seam', 'mu_ratio', 'p1/p99 (area)', 'p1/p99 (count)',
+             'p1/p99 of u', 'qc_mean', 'flips', 'cross', 's', last]
+    print('| ' + ' | '.join(cells) + ' |')
+    print('|' + '---|' * len(cells))
+
+
 def row(res, t):
     r = dict(res.report)
     r['time'] = t
@@ -144,9 +152,7 @@ def row(res, t):
 
 def table(names, budgets, anchor, use_xatlas, auto=True, per_mesh=None):
     """Print the Pareto table; ``per_mesh`` (dict name -> budgets) overrides ``budgets``."""
-    print('| mesh | method | cones | charts | seam | mu_ratio | p1/p99 (area) | p1/p99 (count) | p1/p99 of u '
-          '| qc_mean | flips | cross | s | MovingCones p1/p99 |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+    header('mesh', 'MovingCones p1/p99')
     for name in names:
         got = load(name)
         if got is None:
@@ -229,9 +235,7 @@ def cut_rows(names, budgets, subdivisions, targets):
     ``budgets`` and with each of ``targets`` (target_ratio, up to 64 cones; the xatlas goal on the
     held-out heads is 0.66 and 0.74). Over 20k vertices (cheburashka's at 2) the big-mesh path runs."""
     from meshes import cut_disk, loop_subdivide
-    print('| mesh (triangles) | method | cones | charts | seam | mu_ratio | p1/p99 (area) | p1/p99 (count) '
-          '| p1/p99 of u | qc_mean | flips | cross | s | |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+    header('mesh (triangles)', '')
     for name in names:
         got = load(name)
         if got is None:
