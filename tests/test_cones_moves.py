@@ -2,8 +2,10 @@
 docs/cones.md, "Placement")."""
 import numpy as np
 
-from core.atlas.cones import (L2_BOUNDS, WIDE_BOUNDS, ConeSystem, _batch_spread, _cones_near_flips, _score,
-                              _screen_moves, face_spread, move_cones, place_cones)
+from core.atlas.cones import (L2_BOUNDS, SOFT_FLOORS, SOFT_STEP, WIDE_BOUNDS, ConeSystem, _batch_spread,
+                              _cones_near_flips, _next_floor, _score, _screen_moves, cone_unwrap, face_spread,
+                              move_cones, place_cones)
+from core.mesh import topology
 from core.surfaces import blob
 
 
@@ -96,3 +98,45 @@ def test_cones_next_to_a_flipped_triangle_are_found():
     assert near[0]
     marked = sy.rings(np.unique(F[bad]), 1)
     assert near[1] == marked[S[1]]
+
+
+def _cow_head():
+    """The head of tests/data/cow.obj: faces whose centroid lies at x > 3.2 (horns, ears, muzzle),
+    the largest edge-connected piece; a disk of about 2k triangles (a stand-in for a scanned head)."""
+    import os
+    from core.io.obj import read_obj
+    m = read_obj(os.path.join(os.path.dirname(__file__), 'data', 'cow.obj'))
+    F, _ = m.triangles()
+    F = F[m.V[F].mean(1)[:, 0] > 3.2]
+    count, label = topology.face_components(F, len(m.V))
+    F = F[label == np.argmax(np.bincount(label, minlength=count))]
+    used = np.unique(F)
+    new = np.full(len(m.V), -1)
+    new[used] = np.arange(len(used))
+    return m.V[used], new[F]
+
+
+def test_horn_tips_get_sharp_cones():
+    """A horn is a long tube closed at its tip: flattened, its tip wants a cone angle near 0. With
+    the wide bounds' upper end at 4.8 rad (a cone angle of 1.48 rad) the cow's head at 10 cones
+    realised 0.341 per triangle; at 5.5 (0.78 rad) 0.389."""
+    V, F = _cow_head()
+    assert topology.euler_characteristic(F) == 1 and len(topology.boundary_loops(F, len(V))) == 1
+    rep = cone_unwrap(V, F, target_ratio=None, max_cones=10).report
+    assert rep['cones'] == 10 and rep['kappa_max'] > 4.9
+    assert rep['flips'] == 0 and rep['overlaps'] == 0 and rep['degenerate'] == 0
+    assert rep['mu_ratio_p1_p99'] >= 0.37 and rep['mu_ratio_p1_p99_area'] >= 0.37
+
+
+def test_a_strong_negative_cone_is_softened_gently():
+    """A cone next to a flipped or squashed triangle gets a raised lower bound: from its own curvature
+    by SOFT_STEP while below SOFT_FLOORS[0], then SOFT_FLOORS (a cow's head at 9 cones, 33k triangles:
+    -5.5 -> -5.0 is clean at 0.405; the old jump to -2.0 realised 0.219)."""
+    seq = [-5.5]
+    while seq[-1] < SOFT_FLOORS[-1]:
+        seq.append(_next_floor(seq[-1]))
+    assert np.allclose(seq[:8], [-5.5, -5.0, -4.5, -4.0, -3.5, -3.0, -2.5, -2.0])
+    assert np.allclose(np.diff(seq[:7]), SOFT_STEP)
+    assert seq[-3:] == [-2.0, -1.0, 0.0] and np.all(np.diff(seq) > 0)
+    # a cone near the first floor goes to it, as before; a weak one to the next
+    assert _next_floor(-2.3) == -2.0 and _next_floor(-1.5) == -1.0 and _next_floor(0.0) == 0.0

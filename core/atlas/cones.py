@@ -73,9 +73,12 @@ UNTANGLE_MARGIN = 0.5              # ... each to this fraction of its best clear
 QC_WARN = 1.1                      # the layout's qc_mean above this is reported (the discrete
                                    # conformal map of a coarse mesh with strong cones is not exact)
 L2_BOUNDS = (-3.0, 3.5)            # curvature bounds of the area-L2 angles (placement, first run)
-WIDE_BOUNDS = (-5.5, 4.8)          # second placement run (MovingCones' cones reach -5.8 .. 4.8 rad;
-                                   # wedges over 2*pi are split by the cut)
+WIDE_BOUNDS = (-5.5, 5.5)          # second placement run (MovingCones' cones reach -5.8 .. 4.8 rad;
+                                   # wedges over 2*pi are split by the cut; a horn's tip needs a cone
+                                   # angle near 0: 5.5 leaves 0.78 rad)
 SOFT_FLOORS = (-2.0, -1.0, 0.0)     # raised lower bounds of cones next to a flipped triangle
+SOFT_STEP = 0.5                    # ... a cone below SOFT_FLOORS[0] is first raised by this (``_next_floor``)
+SOFT_ROUNDS = 5                    # layouts with raised floors at most (``softened``)
 VERIFY = 3                         # screened candidates (moves, greedy look-ahead) scored exactly
 MOVE_RADIUS = 3                    # cone moves: each cone tries the vertices within this many edges
 REFACTOR = 0.5                     # Newton: factor the Hessian again when |r| fell by less than this
@@ -1539,7 +1542,7 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True, u=None):
     # the ones ``softened`` relaxes (a patched fold still marks a cone whose metric degenerates)
     soft = np.union1d(bad, info.get('folded_raw', np.zeros(0, np.int64)))
     return {'cut': cut, 'loop': loop, 'uv': uvc, 'seams': seams, 'info': info, 'measured': measured,
-            'crossings': crossings, 'u': u, 'bad': bad, 'soft': soft}
+            'crossings': crossings, 'u': u, 'bad': bad, 'soft': soft, 'kappa': kappa}
 
 
 def _mesh_twins(F, n, cache):
@@ -1684,11 +1687,11 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
         def softened():
             """Angle sets for a layout that still flips: a cone with a flipped triangle within one ring
             (a strong negative cone whose exact metric degenerates a neighbour) gets a higher lower
-            bound (``SOFT_FLOORS``, raised again if it still flips) and the area-L2 angles are
-            re-solved; up to ``len(SOFT_FLOORS) + 1`` rounds."""
+            bound (``_next_floor`` of its curvature in that layout, raised again if it still flips) and
+            the area-L2 angles are re-solved; up to ``SOFT_ROUNDS`` rounds."""
             floors = {}
             ev = dirty[1] if dirty else None
-            for _ in range(len(SOFT_FLOORS) + 1 if not given and len(S) else 0):
+            for _ in range(SOFT_ROUNDS if not given and len(S) else 0):
                 # while the best layout is not clean, or a defective one had the better ratio
                 if ev is None or (best[0][0] and best[0][2] >= dirty[0]):
                     return
@@ -1696,8 +1699,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                 if not near.any():
                     return
                 for i in np.nonzero(near)[0].tolist():
-                    floors[i] = SOFT_FLOORS[min(SOFT_FLOORS.index(floors[i]) + 1, len(SOFT_FLOORS) - 1)
-                                            if i in floors else 0]
+                    floors[i] = _next_floor(floors.get(i, ev['kappa'][i]))
                 low = np.full(len(S), system.bounds[0])
                 low[list(floors)] = list(floors.values())
                 yield (f"l2, {len(floors)} cone(s) next to flips >= {max(floors.values())}",
@@ -1849,6 +1851,15 @@ def _cones_near_flips(system, Fw, ev, S):
     if not len(bad):
         return np.zeros(len(S), bool)
     return system.rings(np.unique(Fw[bad]), 1)[S]
+
+
+def _next_floor(f):
+    """The next lower bound (rad) of a cone whose layout flips, from its curvature or its last bound
+    ``f``: a strong negative cone is raised gently (``SOFT_STEP``; a cow's head at 9 cones: -5.5 ->
+    -5.0 is clean at 0.405, -2.0 at once realised 0.219), then by ``SOFT_FLOORS``."""
+    if f + SOFT_STEP < SOFT_FLOORS[0]:
+        return f + SOFT_STEP
+    return next((s for s in SOFT_FLOORS if s > f + 1e-9), SOFT_FLOORS[-1])
 
 
 def _drop_weak(system, S, kappa, tol=0.02):
