@@ -699,6 +699,20 @@ def test_big_mesh_with_a_cone_budget_is_placed_like_a_small_one(tmp_path, monkey
     assert rep['mu_ratio_p1_p99'] >= 0.35 and rep['mu_ratio_p1_p99_area'] >= 0.35
 
 
+def test_big_mesh_one_click_splits_an_overlap_into_enough_charts(tmp_path, monkeypatch):
+    """The big-mesh path keeps the first clean layout, and the placement's own angles come first. On
+    rocker-arm (10k vertices) taken as a big mesh, one click's 36 cones lay out with one boundary
+    crossing left after 10 chart splits, so a clean but poorer angle set was kept (0.329 per
+    triangle); 11 splits (7 charts after gluing) make the placement's own layout clean (0.61)."""
+    import core.atlas.cones as cones
+    V, F = _corpus(tmp_path, 'rocker-arm')
+    monkeypatch.setattr(cones, 'BIG_MESH', 1000)
+    rep = cone_unwrap(V, F, target_ratio=0.5).report
+    assert rep['angles'] == 'placement' and rep['charts'] <= 12
+    assert rep['flips'] == 0 and rep['overlaps'] == 0 and rep['degenerate'] == 0
+    assert rep['mu_ratio_p1_p99'] >= 0.55 and rep['mu_ratio_p1_p99_area'] >= 0.55 and not rep['warnings']
+
+
 def test_green_columns_are_the_same_when_the_store_is_full(monkeypatch):
     """``ConeSystem.columns`` keeps at most ``COLUMN_BYTES`` of columns; past that it keeps only the
     request's and solves the others again when asked: the answers do not change."""

@@ -9,7 +9,9 @@ from ..mesh import topology
 from .cut import boundary_crossings, cut_along_seams, shelf_pack
 from .cutgraph import is_disk
 
-MAX_SPLITS = 10                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
+MAX_SPLITS = 30                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
+                                   # (then glued back where the pieces do not overlap: ``merge_charts``;
+                                   # rocker-arm x1's one click needed 16 splits for 6 charts)
 
 
 def _cut_twins(Fc, twin):

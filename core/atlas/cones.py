@@ -1748,12 +1748,15 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                                                                  [np.inf] * len(alts)))):
         # the other placements (greedy / L2 start, other curvature bounds), while the best one has
         # no clean layout, realises less than another placement's estimate (ALT_MARGIN below it),
-        # or misses the target that another placement's estimate reaches
+        # or misses the target that another placement's estimate reaches (a clean layout that meets
+        # the target keeps the placement's cones: the fewest that reach it)
         if cones is not None or n > BIG_MESH:
             break
         missed = target_ratio is not None and best is not None and best[0][2] < target_ratio <= est
         if best is not None and best[0][0] and best[0][2] >= est - ALT_MARGIN and not missed:
             continue
+        if best is not None and best[0][0] and target_ratio is not None and best[0][2] >= target_ratio:
+            continue        # the target holds, cleanly, with the placement's (fewest) cones
         system.bounds = bounds
         if not system.alternate_moved[j]:
             # (automatic mode: only the best placement was moved; this one is moved now)
