@@ -1702,7 +1702,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=2,
                     floors[i] = _next_floor(floors.get(i, ev['kappa'][i]))
                 low = np.full(len(S), system.bounds[0])
                 low[list(floors)] = list(floors.values())
-                yield (f"l2, {len(floors)} cone(s) next to flips >= {max(floors.values())}",
+                yield (f"l2, {len(floors)} cone(s) next to flips >= {max(floors.values()):.2f}",
                        system.l2_angles(S, lower=low))
                 ev = last['ev'] if last.get('ev') is not None and len(last['ev']['soft']) else None
 
