@@ -752,6 +752,12 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
     gives it no moves). Returns (cones (c,), kappa (c,), history list of (count, spread))."""
     report = progress or (lambda f, msg: None)
     quick = system.n > BIG_MESH and target_ratio is not None
+
+    def rank(S, spread):
+        """The order of the runs: reaching the target first, then fewer cones (only among runs that
+        reach it), then the spread."""
+        hit = target_ratio is not None and spread >= target_ratio
+        return hit, -len(S) if hit else 0, spread
     if candidates is None:
         candidates = 0 if quick else 12
     if bounds is None:
@@ -767,8 +773,7 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
             S, hist = _greedy(system, target_ratio, max_cones, c,
                               lambda f, msg, b=b: report((b + f) / total, msg))
             sc = _score(system, S)[0] if S else hist[-1][1]
-            hit = target_ratio is not None and sc >= target_ratio
-            runs.append(((hit, -len(S) if hit else 0, sc), S, hist))
+            runs.append((rank(S, sc), S, hist))
         key, S, history = max(runs, key=lambda r: r[0])
         if not S:
             return np.zeros(0, np.int64), np.zeros(0), history
@@ -787,8 +792,7 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
         for lim in (bounds if target_ratio is None else [results[0][4]]):
             system.bounds = lim
             S, kap, sc = eliminate(system, pool, count, target_ratio)
-            hit = target_ratio is not None and sc >= target_ratio
-            sparse_runs.append([(hit, -len(S) if hit else 0, sc), list(S), kap, [(len(S), sc)], lim])
+            sparse_runs.append([rank(S, sc), list(S), kap, [(len(S), sc)], lim])
         sparse_runs.sort(key=lambda r: r[0], reverse=True)
         # fixed budget: the best greedy and the best L2 start are moved; automatic: the best of all
         moved = results[:1] + sparse_runs[:1] if target_ratio is None else \
@@ -801,9 +805,8 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
         S, kap, best, _ = move_cones(system, r[1], r[2], r[0][2], radius=MOVE_RADIUS, sweeps=sweeps,
                                      report=lambda f, msg, b=b: report((len(bounds) + b + f) / total, msg))
         r[3] = r[3] + [(len(S), best)]
-        hit = target_ratio is not None and best >= target_ratio
-        r[:3] = [(hit, -len(S) if hit else 0, best), S, kap]
-        if hit and best >= target_ratio + TOP_UP_MARGIN:
+        r[:3] = [rank(S, best), S, kap]
+        if r[0][0] and best >= target_ratio + TOP_UP_MARGIN:
             # the greedy stopped at the target, and the moves lifted the spread past it (on a fine
             # mesh far past: its greedy is weak): fewer cones reach the target. Thinned while the
             # spread stays TOP_UP_MARGIN above the target, the rest moved once more.
@@ -813,7 +816,7 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=2, progress=None,
             if len(S2) < len(S):
                 S2, k2, b2, _ = move_cones(system, S2, k2, b2, radius=MOVE_RADIUS, sweeps=sweeps, report=step)
                 r[3] = r[3] + [(len(S2), b2)]
-                r[:3] = [(b2 >= target_ratio, -len(S2) if b2 >= target_ratio else 0, b2), list(S2), k2]
+                r[:3] = [rank(S2, b2), list(S2), k2]
     results.sort(key=lambda r: r[0], reverse=True)
     key, S, kap, history, lim = results[0]
     system.bounds = lim
