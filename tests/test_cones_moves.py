@@ -2,9 +2,9 @@
 docs/cones.md, "Placement")."""
 import numpy as np
 
-from core.atlas.cones import (L2_BOUNDS, SOFT_FLOORS, SOFT_STEP, WIDE_BOUNDS, ConeSystem, _batch_spread,
-                              _cones_near_flips, _next_floor, _score, _screen_moves, cone_unwrap, face_spread,
-                              move_cones, place_cones)
+from core.atlas.cones import (L2_BOUNDS, MOVE_RADIUS, SOFT_FLOORS, SOFT_STEP, WIDE_BOUNDS, ConeSystem,
+                              _batch_spread, _cones_near_flips, _next_floor, _score, _screen_moves,
+                              cone_unwrap, face_spread, move_cones, place_cones)
 from core.mesh import topology
 from core.surfaces import blob
 
@@ -57,6 +57,31 @@ def test_moves_improve_the_spread_and_keep_cones_apart():
     assert len(set(S2)) == len(S2) and sy.eligible[S2].all()
     for i, v in enumerate(S2):
         assert not sy.rings([v], 1)[np.delete(np.array(S2), i)].any()
+
+
+def test_moves_run_until_no_cone_can_move():
+    """The default moves are a descent to a local optimum: afterwards no cone gains by moving to any
+    vertex within ``MOVE_RADIUS`` edges (not next to another cone), each checked exactly. With bounds
+    that do not bind, the screen is exact, so no better move can hide behind it."""
+    V, F = blob(8)
+    sy = ConeSystem(V, F)
+    sy.bounds = (-50.0, 50.0)
+    rng = np.random.default_rng(7)
+    ok = sy.eligible.copy()
+    S = []
+    while len(S) < 7:
+        v = int(rng.choice(np.nonzero(ok)[0]))
+        S.append(v)
+        ok &= ~sy.rings([v], 1)
+    best, kap = _score(sy, S)
+    S2, kap2, best2, moves = move_cones(sy, S, kap, best)
+    assert moves > len(S) // 2 and best2 > best
+    for i in range(len(S2)):
+        others = S2[:i] + S2[i + 1:]
+        near = sy.rings([S2[i]], MOVE_RADIUS) & sy.eligible & ~sy.rings(others, 1)
+        near[S2[i]] = False
+        for v in np.nonzero(near)[0].tolist():
+            assert _score(sy, S2[:i] + [v] + S2[i + 1:])[0] <= best2 + 1e-9
 
 
 def test_placement_keeps_its_bounds_and_the_alternate():
