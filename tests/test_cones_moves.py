@@ -4,7 +4,7 @@ import numpy as np
 
 from core.atlas.cones import (L2_BOUNDS, MOVE_RADIUS, SOFT_FLOORS, SOFT_STEP, WIDE_BOUNDS, ConeSystem,
                               _batch_spread, _cones_near_flips, _next_floor, _score, _screen_moves,
-                              cone_unwrap, face_spread, move_cones, place_cones)
+                              cone_unwrap, face_spread, move_cones, nudged, place_cones)
 from core.mesh import topology
 from core.surfaces import blob
 
@@ -165,3 +165,27 @@ def test_a_strong_negative_cone_is_softened_gently():
     assert seq[-3:] == [-2.0, -1.0, 0.0] and np.all(np.diff(seq) > 0)
     # a cone near the first floor goes to it, as before; a weak one to the next
     assert _next_floor(-2.3) == -2.0 and _next_floor(-1.5) == -1.0 and _next_floor(0.0) == 0.0
+
+
+def test_a_cone_next_to_a_squashed_triangle_is_nudged_to_its_best_neighbours():
+    """``nudged`` moves only the cone next to the layout's bad triangles, to a neighbour outside the
+    other cones' one-rings, the best few by the placement's score, with the area-L2 angles."""
+    V, F = blob(8)
+    sy = ConeSystem(V, F)
+    S = [5, 120, 300, 410, 520, 600]
+    bad = np.nonzero((F == S[2]).any(1))[0][:1]                  # one triangle at the third cone
+    got = list(nudged(sy, F, {'soft': bad}, np.array(S), tries=3))
+    assert len(got) == 3
+    ring = sy.rings([S[2]], 1)
+    scores = []
+    for S2, kap in got:
+        assert np.delete(S2, 2).tolist() == S[:2] + S[3:]
+        v = int(S2[2])
+        assert v != S[2] and ring[v] and sy.eligible[v] and not sy.rings(S[:2] + S[3:], 1)[v]
+        sc, k2 = _score(sy, list(S2))
+        assert np.allclose(kap, k2) and abs(kap.sum() - 4 * np.pi) < 1e-9
+        scores.append(sc)
+    assert scores == sorted(scores, reverse=True)
+    # the best of all neighbours comes first
+    others = [v for v in np.nonzero(ring & sy.eligible & ~sy.rings(S[:2] + S[3:], 1))[0] if v != S[2]]
+    assert scores[0] == max(_score(sy, S[:2] + [int(v)] + S[3:])[0] for v in others)

@@ -79,9 +79,11 @@ WIDE_BOUNDS = (-5.5, 5.5)          # second placement run (MovingCones' cones re
 SOFT_FLOORS = (-2.0, -1.0, 0.0)     # raised lower bounds of cones next to a flipped triangle
 SOFT_STEP = 0.5                    # ... a cone below SOFT_FLOORS[0] is first raised by this (``_next_floor``)
 SOFT_ROUNDS = 5                    # layouts with raised floors at most (``softened``)
+NUDGE_TRIES = 4                    # ... or a cone next to flips moved to a neighbour (``nudged``)
 VERIFY = 3                         # screened candidates (moves, greedy look-ahead) scored exactly
 MOVE_RADIUS = 2                    # cone moves: each cone tries the vertices within this many edges
 MOVE_SWEEPS = 16                   # ... in passes until none moves (then one pass a ring wider), at most
+MOVE_OPENING = 2                   # ... and a second descent opened by this many passes a ring wider
 REFACTOR = 0.5                     # Newton: factor the Hessian again when |r| fell by less than this
 KRYLOV_ETA = 0.1                   # big meshes' inexact Newton: relative tolerance of the inner solve
 KRYLOV_ITERS = 12                  # its conjugate gradient iterations before the Hessian is factored
@@ -678,39 +680,47 @@ def eliminate(system, S, count, target_ratio=None, verify=None, report=None):
     return S, kap, best
 
 
-def move_cones(system, S, kap, best, radius=MOVE_RADIUS, sweeps=MOVE_SWEEPS, verify=None, far=0, report=None):
+def move_cones(system, S, kap, best, radius=MOVE_RADIUS, sweeps=MOVE_SWEEPS, verify=None, report=None,
+               both=True):
     """Local search over the k-rings of the cones (MovingCones-style moves, scored by the 1%/99%
     spread of the per-triangle scale, ``face_spread``, with the area-L2 angles re-solved): in a pass,
     for each cone in turn, every eligible vertex within k edges (not next to another cone) is
     screened at once (``_screen_moves``), the ``verify`` best are scored exactly (``_score``) and the
     cone moves to the best one if it beats ``best``. A variable-neighbourhood descent: passes at
     ``k = radius`` until no cone moves, then one pass at ``radius + 1``; if that moved a cone, back to
-    ``radius``, else stop; at most ``sweeps`` passes. Why: a fixed count of wider passes stops short
-    of a local optimum, and the narrow rings alone stall on a fine mesh (rocker-arm 18 cones: 0.614
-    after two passes at 3, 0.628 to convergence at 2; rocker-arm subdivided once: 0.505, 0.496 and
-    0.521 with this descent; docs/cones.md). ``S`` list of cone ids, ``kap`` (k,) their angles,
-    ``best`` their spread. Returns (S, kap, best, moves made)."""
-    S = list(S)
+    ``radius``, else stop; at most ``sweeps`` passes. ``both``: two descents from the same cones,
+    one of them opened by ``MOVE_OPENING`` passes at ``radius + 1``; the better is kept (the
+    automatic mode runs the first only: time). Why: a fixed count of
+    wider passes stops short of a local optimum, and which optimum a descent reaches depends on its
+    first steps, with neither opening better on every mesh (the placement's estimate, narrow / wide
+    opening: rocker-arm 18 cones 0.628 / 0.620, cheburashka 16 0.280 / 0.343, spot 16 0.407 / 0.420;
+    two passes at 3 alone: 0.614, 0.330, 0.405; docs/cones.md). ``S`` list of cone ids, ``kap`` (k,)
+    their angles, ``best`` their spread. Returns (S, kap, best, moves made)."""
+    runs = []
+    openings = (0, MOVE_OPENING) if both and sweeps > 1 else (0,)
+    for j, opening in enumerate(openings):
+        def step(f, msg, j=j):
+            if report:
+                report((j + f) / len(openings), msg)
+        runs.append(_descent(system, list(S), kap, best, radius, sweeps, opening,
+                             VERIFY if verify is None else verify, step))
+    return max(runs, key=lambda r: r[2])
+
+
+def _descent(system, S, kap, best, radius, sweeps, opening, verify, report):
+    """One descent of ``move_cones``: ``opening`` passes over the ``radius + 1``-rings, then the
+    passes at ``radius`` (one wider pass after each stall). Returns (S, kap, best, moves made)."""
     moves = 0
-    verify = VERIFY if verify is None else verify
-    k = radius
+    k = radius + 1 if opening else radius
     for sweep in range(sweeps):
         moved = False
         for i in range(len(S)):
-            if report:
-                report(1 - 0.5 ** (sweep + i / len(S)), "moving cones")   # passes: not known ahead
+            report(1 - 0.5 ** (sweep + i / len(S)), "moving cones")   # passes: not known ahead
             others = S[:i] + S[i + 1:]
             blocked = system.rings(others, 1) if others else np.zeros(system.n, bool)
             near = system.rings([S[i]], k)
             near[S[i]] = False
-            ok = system.eligible & ~blocked
-            cand = np.nonzero(near & ok)[0]
-            if far and others:
-                # the most extreme vertices of u without this cone: where it may be needed more
-                u = system.u_of(others, system.l2_angles(others))
-                idx = np.nonzero(ok & ~near)[0]
-                order = idx[np.argsort(u[idx])]
-                cand = np.unique(np.r_[cand, order[:far // 2], order[-(far // 2):]])
+            cand = np.nonzero(near & system.eligible & ~blocked)[0]
             if not len(cand):
                 continue
             approx = _screen_moves(system, S, kap, i, cand)
@@ -720,7 +730,11 @@ def move_cones(system, S, kap, best, radius=MOVE_RADIUS, sweeps=MOVE_SWEEPS, ver
                 if sc > best + 1e-9:
                     best, kap, S, moved = sc, kk, T, True
                     moves += 1
-        if moved:
+        if sweep + 1 < opening:
+            continue                        # the opening's wide passes
+        if sweep + 1 == opening:
+            k = radius                      # the opening ends: the narrow descent starts
+        elif moved:
             k = radius
         elif k == radius:
             k = radius + 1                  # stalled: one pass over the wider rings
@@ -814,7 +828,8 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=MOVE_SWEEPS, prog
             break
         system.bounds = r[4]
         S, kap, best, _ = move_cones(system, r[1], r[2], r[0][2], radius=MOVE_RADIUS, sweeps=sweeps,
-                                     report=lambda f, msg, b=b: report((len(bounds) + b + f) / total, msg))
+                                     report=lambda f, msg, b=b: report((len(bounds) + b + f) / total, msg),
+                                     both=target_ratio is None)
         r[3] = r[3] + [(len(S), best)]
         r[:3] = [rank(S, best), S, kap]
         if r[0][0] and best >= target_ratio + TOP_UP_MARGIN:
@@ -825,7 +840,8 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=MOVE_SWEEPS, prog
                 report((len(bounds) + b + f) / total, msg)
             S2, k2, b2 = eliminate(system, S, len(S), target_ratio + TOP_UP_MARGIN, report=step)
             if len(S2) < len(S):
-                S2, k2, b2, _ = move_cones(system, S2, k2, b2, radius=MOVE_RADIUS, sweeps=sweeps, report=step)
+                S2, k2, b2, _ = move_cones(system, S2, k2, b2, radius=MOVE_RADIUS, sweeps=sweeps, report=step,
+                                           both=False)
                 r[3] = r[3] + [(len(S2), b2)]
                 r[:3] = [rank(S2, b2), list(S2), k2]
     results.sort(key=lambda r: r[0], reverse=True)
@@ -1645,10 +1661,14 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
                              "to 4*pi)")
     given = isinstance(cones, tuple) and len(cones) == 2
 
-    def lay_out(S, kappa):
+    def lay_out(S, kappa, bar=0.0, quick=False):
         """Cut the mesh through the cones ``S`` and lay out the angle candidates on that cut
-        (the placement's ``kappa`` first). Returns (best (key, label, kappa, evaluation) or None,
-        list of what was tried)."""
+        (the placement's ``kappa`` first; ``quick``: then only its exact-metric correction and its
+        softened sets); ``bar``:
+        the ratio of a clean layout of other cones in hand (a candidate estimated ``SKIP_MARGIN``
+        below it, or below this cut's best clean one, is skipped). Returns (best (key, label,
+        kappa, evaluation) or None, list of what was tried, the best layout with defects as
+        [ratio, evaluation] or [])."""
         report_progress(0.7, 'cutting')
         t = time.perf_counter()
         seams0 = cut_graph(Vw, Fw, S)
@@ -1724,14 +1744,22 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         first = [('given' if given else 'placement', kappa)]
         # a big mesh keeps its first clean layout: the placement's angles, softened where they flip,
         # before the other sets (a small mesh lays out every set and keeps the best)
-        sets = (first, softened(), candidates()) if n > BIG_MESH else \
-            (first, candidates(), corrected(), softened())
+        if quick:
+            sets = (first, corrected(), softened())
+        elif n > BIG_MESH:
+            sets = (first, softened(), candidates())
+        else:
+            sets = (first, candidates(), corrected(), softened())
+        seen = []
         for label, kap in itertools.chain(*sets):
             if big_done():
                 break                                   # big mesh: the first valid layout is kept
+            if any(np.array_equal(kap, k0) for k0 in seen):
+                continue                                # (leaves' angles equal to the placement's)
+            seen.append(kap)
             u_lin = system.u_of(S, kap)
             est = face_spread(Fw, system.A, u_lin)
-            if best is not None and best[0][0] and est < best[0][2] - SKIP_MARGIN:
+            if est < max(bar, clean_ratio(best)) - SKIP_MARGIN:
                 # a layout realises at most about its estimate: this one cannot beat the clean best
                 tried.append({'angles': label, 'estimate': est, 'skipped': True})
                 continue
@@ -1753,10 +1781,11 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
                 dirty[:] = [key[2], ev]
             if best is None or key > best[0]:
                 best = (key, label, kap, ev)
-        return best, tried
+        return best, tried, dirty
 
     t_lay = time.perf_counter()
-    best, tried = lay_out(S, kappa)
+    best, tried, dirty = lay_out(S, kappa)
+    kept_bounds = system.bounds
     alts = getattr(system, 'alternates', [])
     for j, ((S2, k2, bounds), est) in enumerate(zip(alts, getattr(system, 'alternate_scores',
                                                                  [np.inf] * len(alts)))):
@@ -1774,13 +1803,14 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         system.bounds = bounds
         if not system.alternate_moved[j]:
             # (automatic mode: only the best placement was moved; this one is moved now)
-            S2, k2, _, _ = move_cones(system, list(S2), k2, est, radius=MOVE_RADIUS, sweeps=sweeps)
+            S2, k2, _, _ = move_cones(system, list(S2), k2, est, radius=MOVE_RADIUS, sweeps=sweeps,
+                                      both=target_ratio is None)
             S2 = np.array(S2, np.int64)
         S2, k2 = _drop_weak(system, S2, k2)
-        best2, tried2 = lay_out(S2, k2)
+        best2, tried2, dirty2 = lay_out(S2, k2, clean_ratio(best))
         tried += [dict(c, angles=f"{c['angles']} ({len(S2)} cones, bounds {bounds})") for c in tried2]
         if best2 is not None and (best is None or best2[0] > best[0]):
-            best, S = best2, S2
+            best, S, dirty, kept_bounds = best2, S2, dirty2, bounds
     aim = target_ratio
     for _ in range(TOP_UPS if cones is None and target_ratio is not None and n <= BIG_MESH else 0):
         # automatic mode: the layout realises less than the placement's estimate promised, so the
@@ -1794,10 +1824,20 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         S2, k2 = _drop_weak(system, S2, k2)
         if len(S2) <= len(S):
             break
-        best2, tried2 = lay_out(S2, k2)
+        best2, tried2, dirty2 = lay_out(S2, k2, clean_ratio(best))
         tried += [dict(c, angles=f"{c['angles']} ({len(S2)} cones, top-up for {aim:.3f})") for c in tried2]
         if best2 is not None and best2[0] > best[0]:
-            best, S, history = best2, S2, h2
+            best, S, history, dirty, kept_bounds = best2, S2, h2, dirty2, system.bounds
+    if cones is None and n <= BIG_MESH and dirty and best is not None and \
+            not (best[0][0] and best[0][2] >= dirty[0]):
+        # a layout with a squashed or flipped triangle next to a cone realised more than the best
+        # clean one: the same cones with that cone moved to a neighbour (``nudged``)
+        system.bounds = kept_bounds
+        for S2, k2 in nudged(system, Fw, dirty[1], S):
+            best2, tried2, _ = lay_out(S2, k2, clean_ratio(best), quick=True)
+            tried += [dict(c, angles=f"{c['angles']} (a cone next to flips moved)") for c in tried2]
+            if best2 is not None and best2[0] > best[0]:
+                best, S = best2, S2
     timings['layout'] = time.perf_counter() - t_lay - timings['cut']
     if best is None:
         raise ConformalError(f"no layout of the cut disk could be built: {tried[0]['error']}",
@@ -1856,6 +1896,11 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
     return ConeResult(uv=uv, seams=seams_in, cones=orig[S], kappa=kappa, u=u_in, report=rep)
 
 
+def clean_ratio(best):
+    """The realised ratio of a kept layout ``(key, label, kappa, evaluation)`` if it is clean, else 0."""
+    return best[0][2] if best is not None and best[0][0] else 0.0
+
+
 def _cones_near_flips(system, Fw, ev, S):
     """(k,) bool: the cones ``S`` within one ring of a triangle that the layout ``ev`` (``_evaluate``)
     flips or squashes (``ev['bad']``; else the flips of ``ev['uv']`` on ``ev['cut'].F``, whose faces
@@ -1868,6 +1913,30 @@ def _cones_near_flips(system, Fw, ev, S):
     if not len(bad):
         return np.zeros(len(S), bool)
     return system.rings(np.unique(Fw[bad]), 1)[S]
+
+
+def nudged(system, Fw, ev, S, tries=NUDGE_TRIES):
+    """Cone sets for a layout ``ev`` (``_evaluate``) that flips or squashes a triangle next to a
+    cone: one such cone moved to one of its neighbours (eligible, outside the other cones'
+    one-rings), the ``tries`` best of these moves by ``_score``, with the area-L2 angles. Why: the
+    exact metric of a strong negative cone can open one corner of its one-ring to a straight angle
+    at one vertex and not at the next (the cow cut at 7 cones: softened to -4.5, 0.246; the cone
+    moved one edge, clean at 0.299). Yields (S2 (k,) int, kappa (k,)), best first."""
+    S = list(np.asarray(S).tolist())
+    scored = []
+    for i in np.nonzero(_cones_near_flips(system, Fw, ev, np.asarray(S)))[0].tolist():
+        others = S[:i] + S[i + 1:]
+        near = system.rings([S[i]], 1) & system.eligible
+        if others:
+            near &= ~system.rings(others, 1)
+        near[S[i]] = False
+        for v in np.nonzero(near)[0].tolist():
+            T = S[:i] + [v] + S[i + 1:]
+            sc, kap = _score(system, T)
+            scored.append((sc, T, kap))
+    scored.sort(key=lambda r: r[0], reverse=True)
+    for _, T, kap in scored[:tries]:
+        yield np.array(T, np.int64), kap
 
 
 def _next_floor(f):
