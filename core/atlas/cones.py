@@ -690,12 +690,12 @@ def move_cones(system, S, kap, best, radius=MOVE_RADIUS, sweeps=MOVE_SWEEPS, ver
     ``k = radius`` until no cone moves, then one pass at ``radius + 1``; if that moved a cone, back to
     ``radius``, else stop; at most ``sweeps`` passes. ``both``: two descents from the same cones,
     one of them opened by ``MOVE_OPENING`` passes at ``radius + 1``; the better is kept (the
-    automatic mode runs the first only: time). Why: a fixed count of
-    wider passes stops short of a local optimum, and which optimum a descent reaches depends on its
-    first steps, with neither opening better on every mesh (the placement's estimate, narrow / wide
-    opening: rocker-arm 18 cones 0.628 / 0.620, cheburashka 16 0.280 / 0.343, spot 16 0.407 / 0.420;
-    two passes at 3 alone: 0.614, 0.330, 0.405; docs/cones.md). ``S`` list of cone ids, ``kap`` (k,)
-    their angles, ``best`` their spread. Returns (S, kap, best, moves made)."""
+    automatic mode runs the first only: time). Why: a fixed count of wider passes stops short of a
+    local optimum, and which optimum a descent reaches depends on its first steps, with neither
+    opening better on every mesh (the placement's estimate, narrow / wide opening: rocker-arm 18
+    cones 0.628 / 0.620, cheburashka 16 0.280 / 0.343, spot 16 0.407 / 0.420; two passes at 3
+    alone: 0.614, 0.330, 0.405; docs/cones.md). ``S`` list of cone ids, ``kap`` (k,) their angles,
+    ``best`` their spread. Returns (S, kap, best, moves made)."""
     runs = []
     openings = (0, MOVE_OPENING) if both and sweeps > 1 else (0,)
     for j, opening in enumerate(openings):
@@ -1664,11 +1664,10 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
     def lay_out(S, kappa, bar=0.0, quick=False):
         """Cut the mesh through the cones ``S`` and lay out the angle candidates on that cut
         (the placement's ``kappa`` first; ``quick``: then only its exact-metric correction and its
-        softened sets); ``bar``:
-        the ratio of a clean layout of other cones in hand (a candidate estimated ``SKIP_MARGIN``
-        below it, or below this cut's best clean one, is skipped). Returns (best (key, label,
-        kappa, evaluation) or None, list of what was tried, the best layout with defects as
-        [ratio, evaluation] or [])."""
+        softened sets); ``bar``: the ratio of a clean layout of other cones in hand (a candidate
+        estimated ``SKIP_MARGIN`` below it, or below this cut's best clean one, is skipped).
+        Returns (best (key, label, kappa, evaluation) or None, list of what was tried, the best
+        layout with defects as [ratio, evaluation] or [])."""
         report_progress(0.7, 'cutting')
         t = time.perf_counter()
         seams0 = cut_graph(Vw, Fw, S)
