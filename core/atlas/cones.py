@@ -690,7 +690,8 @@ def move_cones(system, S, kap, best, radius=MOVE_RADIUS, sweeps=MOVE_SWEEPS, ver
     ``k = radius`` until no cone moves, then one pass at ``radius + 1``; if that moved a cone, back to
     ``radius``, else stop; at most ``sweeps`` passes. ``both``: two descents from the same cones,
     one of them opened by ``MOVE_OPENING`` passes at ``radius + 1``; the better is kept (the
-    automatic mode runs the first only: time). Why: a fixed count of wider passes stops short of a
+    automatic mode and meshes over ``BIG_MESH`` vertices run the first only: time; on spot x2 and
+    rocker-arm x1 the first was the better). Why: a fixed count of wider passes stops short of a
     local optimum, and which optimum a descent reaches depends on its first steps, with neither
     opening better on every mesh (the placement's estimate, narrow / wide opening: rocker-arm 18
     cones 0.628 / 0.620, cheburashka 16 0.280 / 0.343, spot 16 0.407 / 0.420; two passes at 3
@@ -829,7 +830,7 @@ def place_cones(system, target_ratio=0.5, max_cones=48, sweeps=MOVE_SWEEPS, prog
         system.bounds = r[4]
         S, kap, best, _ = move_cones(system, r[1], r[2], r[0][2], radius=MOVE_RADIUS, sweeps=sweeps,
                                      report=lambda f, msg, b=b: report((len(bounds) + b + f) / total, msg),
-                                     both=target_ratio is None)
+                                     both=target_ratio is None and system.n <= BIG_MESH)
         r[3] = r[3] + [(len(S), best)]
         r[:3] = [rank(S, best), S, kap]
         if r[0][0] and best >= target_ratio + TOP_UP_MARGIN:
