@@ -1802,7 +1802,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
             continue        # the target holds, cleanly, with the placement's (fewest) cones
         system.bounds = bounds
         if not system.alternate_moved[j]:
-            # (automatic mode: only the best placement was moved; this one is moved now)
+            # (only the best placement, with a fixed budget the best greedy run and the best L2
+            # start, were moved; this one is moved now, as ``place_cones`` would have)
             S2, k2, _, _ = move_cones(system, list(S2), k2, est, radius=MOVE_RADIUS, sweeps=sweeps,
                                       both=target_ratio is None)
             S2 = np.array(S2, np.int64)
