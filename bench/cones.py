@@ -17,7 +17,7 @@ the cut's length (chart splits included) as a fraction of the total edge length.
 MovingCones p1/p99 (vertex level) for comparison: spot 16 cones 0.367, 41 cones 0.615; cheburashka
 24 cones 0.383, 53 cones 0.604; rocker-arm 8 cones 0.420, 18 cones 0.617.
 
-``--cuts [names]``: head-like disks cut from spot, cow and cheburashka (``CUTS``), Loop-subdivided
+``--cuts [names]``: head-like disks cut from spot, cow and cheburashka (``meshes.HEAD_CUTS``), Loop-subdivided
 ``--cut-subdivisions`` times (default 2: 28k-64k triangles), at 7, 9 and 10 cones and at the
 ``--targets`` ratios (default 0.66 and 0.74, the xatlas goal on the issue's held-out heads): stand-ins
 for the held-out scans, which are not used here.
@@ -48,7 +48,7 @@ from core.mesh import topology
 from core.mesh.measures import uv_measures
 from core.mesh.validate import normalise_scale
 from core.surfaces import blob, subdivide
-from meshes import corpus_dir
+from meshes import HEAD_CUTS, corpus_dir
 
 MESHES = corpus_dir()
 MOVING_CONES = {'spot': {16: 0.367, 41: 0.615}, 'cheburashka': {24: 0.383, 53: 0.604},
@@ -224,13 +224,11 @@ def corpus_rows(names, budgets, auto=True, n=65):
                   f"{r['flips']} | {r['overlaps']} | {dt:.1f} | {len(res.warnings)} |", flush=True)
 
 
-# head-like disks cut from the public meshes (not the held-out scans): direction, height (mesh units)
-CUTS = {'spot': ((0, 0, 1), 0.546), 'cow': ((1, 0, 0), 3.2), 'cheburashka': ((0, 1, 0), 0.71)}
 
 
 def cut_rows(names, budgets, subdivisions, targets):
-    """Head-like disks (``CUTS``: a plane cut of spot, cow and cheburashka, the largest piece, then
-    ``subdivisions`` steps of Loop's rule, to the size of scanned heads: 28k-64k triangles at 2), as
+    """Head-like disks (``meshes.HEAD_CUTS``: a plane cut of spot, cow and cheburashka, the largest piece,
+    then ``subdivisions`` steps of Loop's rule, to the size of scanned heads: 28k-64k triangles at 2), as
     stand-ins for the issue's held-out scans: ``cone_unwrap`` with exactly N cones for each of
     ``budgets`` and with each of ``targets`` (target_ratio, up to 64 cones; the xatlas goal on the
     held-out heads is 0.66 and 0.74). Over 20k vertices (cheburashka's at 2) the big-mesh path runs."""
@@ -240,7 +238,7 @@ def cut_rows(names, budgets, subdivisions, targets):
         got = load(name)
         if got is None:
             continue
-        V, F = cut_disk(*got, *CUTS[name])
+        V, F = cut_disk(*got, *HEAD_CUTS[name])
         for _ in range(subdivisions):
             V, F = loop_subdivide(V, F)
         label = f"{name} cut x{subdivisions} ({len(F)})"
@@ -301,7 +299,7 @@ def main():
                     help='with --big: also cheburashka, rocker-arm (subdivided once) and cow (twice)')
     ap.add_argument('--acceptance', action='store_true', help='only the MovingCones rows')
     ap.add_argument('--cuts', nargs='*', default=None,
-                    help='head-like disks cut from the corpus (names from CUTS; none given: all), '
+                    help='head-like disks cut from the corpus (names from HEAD_CUTS; none given: all), '
                          'at --budgets (default here 7 9 10) and --targets')
     ap.add_argument('--cut-subdivisions', type=int, default=2, help="with --cuts: Loop's steps")
     ap.add_argument('--targets', nargs='*', type=float, default=[0.66, 0.74], help='with --cuts')
@@ -313,7 +311,7 @@ def main():
         big(a.big_extra)
     elif a.cuts is not None:
         budgets = a.budgets if a.budgets != ap.get_default('budgets') else [7, 9, 10]
-        cut_rows(a.cuts or list(CUTS), budgets, a.cut_subdivisions, a.targets)
+        cut_rows(a.cuts or list(HEAD_CUTS), budgets, a.cut_subdivisions, a.targets)
     elif a.acceptance:
         table(list(MOVING_CONES), [], False, False, False, per_mesh=MOVING_CONES)
     elif a.corpus is not None:

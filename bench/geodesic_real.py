@@ -13,6 +13,8 @@ repository; the script says so and skips them if that folder is missing) that th
 disks or disk islands: closed meshes are cut along their OBJ ``vt`` seams when they have some (spot),
 and skipped otherwise (use sphere mode for those). Distances are then on the cut surface, and the
 exact reference is MMP on the same cut surface (its split vertices), restricted to the source's part.
+Head-like disks (stand-ins for the held-out scans): ``--meshes cow-cut spot-cut2 cheburashka-cut1``
+(``meshes.HEAD_CUTS``, then the given number of Loop subdivisions).
 
 Errors: relative to the exact distance, mean and max over the vertices of the source's part farther
 than ``EXCLUDE`` times the part's bounding-box diagonal from the source; a vertex split by a seam counts
@@ -90,6 +92,16 @@ def load(name):
         return V, F, None
     if name in SURF:
         V, F = make_surface(name, 65)
+        return V, F, None
+    if '-cut' in name:                      # head-like disks of bench/cones.py: 'cow-cut', 'spot-cut2', ...
+        from meshes import HEAD_CUTS, cut_disk, loop_subdivide
+        base, steps = name.split('-cut')
+        got = load(base)
+        if got is None:
+            return None
+        V, F = cut_disk(got[0], got[1], *HEAD_CUTS[base])
+        for _ in range(int(steps or 0)):
+            V, F = loop_subdivide(V, F)
         return V, F, None
     path = os.path.join(MESH_DIR, name + '.obj')
     if not os.path.exists(path):

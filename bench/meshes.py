@@ -48,6 +48,10 @@ def loop_subdivide(V, F):
     return np.r_[even, mid], F2
 
 
+# head-like disks cut from the public meshes (not the held-out scans): direction, height (mesh units)
+HEAD_CUTS = {'spot': ((0, 0, 1), 0.546), 'cow': ((1, 0, 0), 3.2), 'cheburashka': ((0, 1, 0), 0.71)}
+
+
 def cut_disk(V, F, direction, height):
     """The part of a mesh beyond a plane: the faces whose centroid lies above ``height`` (mesh units)
     along ``direction`` (3,), their largest edge-connected piece, re-indexed. Returns (V', F'). With

@@ -7,6 +7,7 @@ from core.atlas.cones import (L2_BOUNDS, MOVE_RADIUS, SOFT_FLOORS, SOFT_STEP, WI
                               cone_unwrap, face_spread, move_cones, nudged, place_cones)
 from core.mesh import topology
 from core.surfaces import blob
+from meshgen import cow_head
 
 
 def test_batch_spread_is_face_spread_per_column():
@@ -125,27 +126,11 @@ def test_cones_next_to_a_flipped_triangle_are_found():
     assert near[1] == marked[S[1]]
 
 
-def _cow_head():
-    """The head of tests/data/cow.obj: faces whose centroid lies at x > 3.2 (horns, ears, muzzle),
-    the largest edge-connected piece; a disk of about 2k triangles (a stand-in for a scanned head)."""
-    import os
-    from core.io.obj import read_obj
-    m = read_obj(os.path.join(os.path.dirname(__file__), 'data', 'cow.obj'))
-    F, _ = m.triangles()
-    F = F[m.V[F].mean(1)[:, 0] > 3.2]
-    count, label = topology.face_components(F, len(m.V))
-    F = F[label == np.argmax(np.bincount(label, minlength=count))]
-    used = np.unique(F)
-    new = np.full(len(m.V), -1)
-    new[used] = np.arange(len(used))
-    return m.V[used], new[F]
-
-
 def test_horn_tips_get_sharp_cones():
     """A horn is a long tube closed at its tip: flattened, its tip wants a cone angle near 0. With
     the wide bounds' upper end at 4.8 rad (a cone angle of 1.48 rad) the cow's head at 10 cones
     realised 0.341 per triangle; at 5.5 (0.78 rad) 0.389."""
-    V, F = _cow_head()
+    V, F = cow_head()
     assert topology.euler_characteristic(F) == 1 and len(topology.boundary_loops(F, len(V))) == 1
     rep = cone_unwrap(V, F, target_ratio=None, max_cones=10).report
     assert rep['cones'] == 10 and rep['kappa_max'] > 4.9

@@ -852,3 +852,27 @@ def test_reversed_faces_do_not_matter():
     d_rev, rep = geo.GeodesicSolver(V, G).distance(sources=[5], points=(np.array([f]), b[None, ::-1]))
     assert not rep['warnings']
     assert np.allclose(d_rev, d_clean, rtol=1e-9, atol=1e-12)
+
+
+def test_a_source_the_grid_cannot_seed_is_answered_by_surface_paths():
+    """The cow's head (tests/meshgen.cow_head, ~2k triangles; its map shrinks the horns and the ears
+    by orders of magnitude) at a forced grid of 512: at vertex 561 (a horn tip) the cells are so coarse
+    that no grid node lies inside the source's exact seed, and at vertex 864 (the middle of the head)
+    the refined seed's window holds every node of the chart. Both used to raise (a ConformalError and
+    scikit-fmm's ValueError). Now the first island is answered by surface paths, the same distances as
+    method='paths', with a warning, and the second needs no march: its seed is the answer, within
+    0.5 % of the paths on average."""
+    from meshgen import cow_head
+    V, F = cow_head()
+    gs = geo.GeodesicSolver(V, F, grid=512)
+    paths = geo.GeodesicSolver(V, F, method='paths')
+    d, rep = gs.distance([561])
+    dp, _ = paths.distance([561])
+    assert rep['paths_fallback'] == 1 and rep['marches'] == 0, rep
+    assert any('too coarse to seed' in w for w in rep['warnings']), rep['warnings']
+    assert np.array_equal(d, dp)
+    d, rep = gs.distance([864])
+    dp, _ = paths.distance([864])
+    assert rep['paths_fallback'] == 0 and rep['refined_sources'] == 1 and rep['marches'] == 0, rep
+    far = dp > 0.05 * np.linalg.norm(np.ptp(V, axis=0))
+    assert np.isfinite(d).all() and np.mean(np.abs(d[far] - dp[far]) / dp[far]) < 5e-3

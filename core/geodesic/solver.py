@@ -539,6 +539,12 @@ def calibrate_phi(D, valid, h):
     return phi
 
 
+class _Unseeded(Exception):
+    """Internal: a source the chart's grid cannot seed (no grid node within its exact seed, or outside
+    the rasterised domain). ``GeodesicSolver.distance`` answers that chart by surface paths instead;
+    it never leaves the module."""
+
+
 def resolve_solver(solver):
     """'skfmm' or 'sweep' for a requested ``solver`` ('auto' picks scikit-fmm if it imports)."""
     if solver not in SOLVERS:
@@ -1462,8 +1468,10 @@ class GeodesicSolver:
         marching from the resolved ones: ``MeshRelax``), marches, metric_passes, islands, islands_reached,
         error_estimate (mean relative, dimensionless), error_target, clamped {below_euclid,
         above_edges} (vertex counts), filled_from_edges (vertices no grid node reached, given edge
-        paths from their neighbours), warnings (list of str), seconds {rasterise, solve, sample,
-        total} and, for the set-up, flatten. Raises ``ConformalError``."""
+        paths from their neighbours), paths_islands (islands answered by surface paths), paths_fallback
+        (of those, grid islands where a source lay too coarse to seed: warned), warnings (list of str),
+        seconds {rasterise, solve, sample, total} and, for the set-up, flatten. Raises
+        ``ConformalError``."""
         say = progress or (lambda f, msg: None)
         t0 = time.perf_counter()
         if source_radius is None:
@@ -1487,7 +1495,7 @@ class GeodesicSolver:
         dist_s = np.full(N, np.inf)
         marches, radii, reached = 0, [], 0
         hybrid, hybrid_skipped, refined = 0, 0, 0
-        path_est, path_k = {}, []
+        path_est, path_k, unseeded = {}, [], []
         active = np.unique(np.r_[self.chart_of_split[src_split], self.face_island[pf]]).astype(np.int64)
         for k, c in enumerate(active):
             say(0.05 + 0.85 * k / len(active), 'marching')
@@ -1510,8 +1518,22 @@ class GeodesicSolver:
                 continue
             S_uv = np.concatenate([ch.uv[loc], np.einsum('kc,kcd->kd', pb[mine], ch.uv[ch.F[src_faces]])]) \
                 if mine.any() else ch.uv[loc]
-            d, r, nm, _, nf = self._march_chart(ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius,
-                                                calibrate, own=own)
+            try:
+                d, r, nm, _, nf = self._march_chart(ch, S_uv, loc, src_faces, tree, X_src, upper,
+                                                    source_radius, calibrate, own=own)
+            except _Unseeded:
+                # a source where the grid is too coarse to seed it: this island by surface paths
+                from ..mesh.topology import unique_edges
+                Xp = np.einsum('kc,kcd->kd', pb[mine], ch.V[ch.F[src_faces]]) if mine.any() else None
+                k0 = path_points(len(ch.F), len(unique_edges(ch.F)[0])) or PATH_K[-1]
+                d, path_est[c], k_used = surface_paths(ch.V, ch.F, loc, k0, X=Xp,
+                                                       faces=src_faces if mine.any() else None,
+                                                       target=self.error_target)
+                path_k.append(k_used)
+                unseeded.append(c)
+                dist_s[ch.verts] = d
+                reached += 1
+                continue
             refined += nf
             if ch.free is not None:
                 if ch.free[loc].any() or ch.unresolved[src_faces].any():
@@ -1555,6 +1577,12 @@ class GeodesicSolver:
                                        ch.reflex, ch.free_frac))
         est = max(ests)
         warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w]
+        if unseeded:
+            where = "" if len(self.charts) == 1 else \
+                f" on island{'s' if len(unseeded) > 1 else ''} {', '.join(str(c + 1) for c in unseeded)}"
+            warnings.append(f"a source lies where the grid is too coarse to seed it{where}: those distances "
+                            "come from surface paths on the mesh instead of the grid; use a larger grid or "
+                            "method='auto'")
         if hybrid_skipped:
             warnings.append("a source lies where the grid does not resolve the surface (its cell is larger "
                             "than the triangles there): distances come from the under-resolved grid; use a "
@@ -1582,7 +1610,8 @@ class GeodesicSolver:
             'on_mesh': hybrid, 'refined_sources': refined, 'marches': marches,
             'metric_passes': max([self.charts[c].metric_passes for c in active if c not in path_est],
                                  default=0),
-            'paths_islands': len(path_est), 'steiner_points': max(path_k) if path_k else None,
+            'paths_islands': len(path_est), 'paths_fallback': len(unseeded),
+            'steiner_points': max(path_k) if path_k else None,
             'islands': len(self.charts), 'islands_reached': reached,
             'error_estimate': est, 'clamped': clamped, 'filled_from_edges': filled, 'warnings': warnings,
             'seconds': {k: round(v, 4) for k, v in seconds.items()},
@@ -1603,7 +1632,7 @@ class GeodesicSolver:
         S = G.coords(S_uv)
         mu_s = bilinear(mu, S, valid)
         if not np.isfinite(mu_s).all():
-            raise ConformalError("a source lies outside the flattened domain", 'degenerate', 'larger_grid')
+            raise _Unseeded("a source lies outside the rasterised domain")
         radius = seed_radius(mu, valid, G.h, source_radius)
         src_local = np.zeros(len(ch.V), bool)
         src_local[loc] = True
@@ -1614,7 +1643,7 @@ class GeodesicSolver:
         groups = _groups(mu_s)
         fine = (self._fine_seed(ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius, calibrate)
                 if refine else [None] * len(S))
-        n_fine, fine_marches = 0, 0
+        n_fine, fine_marches, n_marches = 0, 0, 0
         for idx in groups:
             reach = radius * float(mu_s[idx].max() / mu_s[idx].min())
             sub = [fine[i] for i in idx]
@@ -1656,15 +1685,23 @@ class GeodesicSolver:
             phi = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * mu, h_far)
             phi = np.minimum(phi, h_far)
             seed = phi < 0
-            if not seed.any():
-                raise ConformalError("the source seed covers no grid node", 'degenerate', 'larger_grid')
-            if calibrate:
-                phi = calibrate_phi(phi, valid, G.h)
-            # march without the rim nodes that bridge gaps of the domain (the front would jump between
-            # parts that are far apart on the surface); those get extrapolated values for sampling
-            Tm, used = eikonal_march(Tloc, seed & march_on, phi, mu, ~march_on, G.h, self.solver)
-            Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else np.where(seed, Tloc, Tm)
-            for _ in range(ch.metric_passes):
+            if not (seed & march_on).any():
+                raise _Unseeded("the source seed covers no grid node")
+            if not (march_on & ~seed).any():
+                # the exact seed holds every node (a small chart inside a refined seed's window):
+                # nothing is left to march
+                Tg = np.where(seed, Tloc, np.inf)
+                passes = -1
+            else:
+                if calibrate:
+                    phi = calibrate_phi(phi, valid, G.h)
+                # march without the rim nodes that bridge gaps of the domain (the front would jump
+                # between parts that are far apart on the surface); those get extrapolated values
+                Tm, used = eikonal_march(Tloc, seed & march_on, phi, mu, ~march_on, G.h, self.solver)
+                Tg = np.where(seed, Tloc, Tm + tau) if used == 'skfmm' else np.where(seed, Tloc, Tm)
+                passes = ch.metric_passes
+            n_marches += 1 + passes
+            for _ in range(passes):
                 # march again with the exact per-triangle metric, for the gradient direction of the
                 # previous pass (docs/geodesic.md, "Exact metric")
                 sp_ = directional_mu(np.where(march_on, Tg, np.inf), march_on, G.face, ch.ginv)
@@ -1686,7 +1723,7 @@ class GeodesicSolver:
         sample = valid & ~ch.gap               # nodes that face a gap are no sample of either side
         dist = bilinear(np.where(sample, T, np.nan), ch.P, sample, ch.corner_ok)
         dist = np.where(np.isfinite(fixed), fixed, np.fmin(dist, near))
-        return dist, radius, len(groups) * (1 + ch.metric_passes) + fine_marches, T, n_fine
+        return dist, radius, n_marches + fine_marches, T, n_fine
 
     def _fine_seed(self, ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius, calibrate):
         """Refined seeds (docs/geodesic.md, "Refined seed"). Where the chart's cell at a source is coarse
