@@ -1494,7 +1494,7 @@ class GeodesicSolver:
         N = len(self.vert_of)
         dist_s = np.full(N, np.inf)
         marches, radii, reached = 0, [], 0
-        hybrid, hybrid_skipped, refined = 0, 0, 0
+        hybrid, refined = 0, 0
         path_est, path_k, unseeded = {}, [], []
         active = np.unique(np.r_[self.chart_of_split[src_split], self.face_island[pf]]).astype(np.int64)
         for k, c in enumerate(active):
@@ -1507,42 +1507,41 @@ class GeodesicSolver:
             # vertices that another source is nearer to)
             sel = self.vert_of[src_split[self.chart_of_split[src_split] == c]]
             own = np.r_[by_vertex[np.searchsorted(s[by_vertex], sel)], len(s) + np.flatnonzero(mine)]
-            if ch.paths_k:                      # an island answered by surface paths (``paths_choice``)
+            d = None
+            coarse = not ch.paths_k and ch.free is not None and \
+                (ch.free[loc].any() or ch.unresolved[src_faces].any())
+            if not ch.paths_k and not coarse:
+                S_uv = ch.uv[loc]
+                if mine.any():
+                    S_uv = np.concatenate([S_uv, np.einsum('kc,kcd->kd', pb[mine], ch.uv[ch.F[src_faces]])])
+                try:
+                    d, r, nm, _, nf = self._march_chart(ch, S_uv, loc, src_faces, tree, X_src, upper,
+                                                        source_radius, calibrate, own=own)
+                except _Unseeded:
+                    coarse = True
+            if d is None:
+                # an island answered by surface paths: by choice (``paths_choice``), or because a source
+                # lies where the grid does not resolve the surface (a cell larger than the triangles
+                # there, or no node inside its exact seed: the march from there misses by percents)
+                k0 = ch.paths_k
+                if not k0:
+                    from ..mesh.topology import unique_edges
+                    k0 = path_points(len(ch.F), len(unique_edges(ch.F)[0])) or PATH_K[-1]
+                    unseeded.append(c)
                 Xp = np.einsum('kc,kcd->kd', pb[mine], ch.V[ch.F[src_faces]]) if mine.any() else None
-                d, path_est[c], k_used = surface_paths(ch.V, ch.F, loc, ch.paths_k, X=Xp,
-                                                       faces=src_faces if mine.any() else None,
-                                                       target=self.error_target)
-                path_k.append(k_used)
-                dist_s[ch.verts] = d
-                reached += 1
-                continue
-            S_uv = np.concatenate([ch.uv[loc], np.einsum('kc,kcd->kd', pb[mine], ch.uv[ch.F[src_faces]])]) \
-                if mine.any() else ch.uv[loc]
-            try:
-                d, r, nm, _, nf = self._march_chart(ch, S_uv, loc, src_faces, tree, X_src, upper,
-                                                    source_radius, calibrate, own=own)
-            except _Unseeded:
-                # a source where the grid is too coarse to seed it: this island by surface paths
-                from ..mesh.topology import unique_edges
-                Xp = np.einsum('kc,kcd->kd', pb[mine], ch.V[ch.F[src_faces]]) if mine.any() else None
-                k0 = path_points(len(ch.F), len(unique_edges(ch.F)[0])) or PATH_K[-1]
                 d, path_est[c], k_used = surface_paths(ch.V, ch.F, loc, k0, X=Xp,
                                                        faces=src_faces if mine.any() else None,
                                                        target=self.error_target)
                 path_k.append(k_used)
-                unseeded.append(c)
                 dist_s[ch.verts] = d
                 reached += 1
                 continue
             refined += nf
             if ch.free is not None:
-                if ch.free[loc].any() or ch.unresolved[src_faces].any():
-                    hybrid_skipped += 1
-                else:
-                    d = np.where(np.isnan(d) & ~ch.free, np.inf, d)
-                    d[ch.free] = np.inf
-                    ch.relax.relax(d, ch.free)
-                    hybrid += int(ch.free.sum())
+                d = np.where(np.isnan(d) & ~ch.free, np.inf, d)
+                d[ch.free] = np.inf
+                ch.relax.relax(d, ch.free)
+                hybrid += int(ch.free.sum())
             dist_s[ch.verts] = d
             marches += nm
             radii.append(r)
@@ -1580,13 +1579,9 @@ class GeodesicSolver:
         if unseeded:
             where = "" if len(self.charts) == 1 else \
                 f" on island{'s' if len(unseeded) > 1 else ''} {', '.join(str(c + 1) for c in unseeded)}"
-            warnings.append(f"a source lies where the grid is too coarse to seed it{where}: those distances "
-                            "come from surface paths on the mesh instead of the grid; use a larger grid or "
-                            "method='auto'")
-        if hybrid_skipped:
-            warnings.append("a source lies where the grid does not resolve the surface (its cell is larger "
-                            "than the triangles there): distances come from the under-resolved grid; use a "
-                            "larger grid, or a more uniform map (cones, seams)")
+            warnings.append(f"a source lies where the grid does not resolve the surface{where} (its cells "
+                            "are larger than the triangles there): those distances come from surface paths "
+                            "on the mesh instead; use a larger grid, or a more uniform map (cones, seams)")
         if self.report.get('folded_chart'):
             warnings.append("the flat map of the mesh overlaps itself, so one grid cannot hold it: "
                             "distances may cross between its layers; use method='auto' (surface paths) "
