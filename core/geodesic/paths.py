@@ -16,104 +16,163 @@ STEINER_ORDER = 1.85  # the Steiner paths' excess falls as k^-1.85 (measured on 
 STEINER = 15         # Steiner points per edge in the refined seed's shortest paths (``steiner_distances``)
 
 
-def _steiner_graph(V, F, src=None, X=None, src_faces=None, k=STEINER):
-    """Shortest paths on the surface of the triangles ``F`` (m,3) (vertices ``V`` (n,3)) from source
-    vertices ``src`` (an index or (s,) indices: the distance to the nearest) and/or surface points:
-    one point ``X`` (3,) in the triangles ``src_faces`` (its star), or points ``X`` (p,3) each in its
-    triangle ``src_faces`` (p,); through ``k`` Steiner points on every edge (the graph of the module's
-    docstring). Returns ``(dS (p,) at every graph point (the n vertices first); P (p,3) the points;
-    own (m, 3 + 3k) the points on each triangle's boundary; ue (e,2) the edges, sorted; pid (e,k) the
-    indices of their points)``."""
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import dijkstra
-    n, m = len(V), len(F)
-    Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
-    ue, inv = np.unique(Ed, axis=0, return_inverse=True)
-    inv = inv.reshape(3, m).T                                            # (m,3) edge of each side
-    t = np.arange(1, k + 1) / (k + 1)
-    P = V[ue[:, 0]][:, None] * (1 - t)[None, :, None] + V[ue[:, 1]][:, None] * t[None, :, None]
-    pts = np.concatenate([V, P.reshape(-1, 3)])
-    pid = n + np.arange(len(ue) * k).reshape(len(ue), k)
-    own = np.concatenate([F, pid[inv].reshape(m, 3 * k)], 1)              # (m, 3 + 3k)
-    # segments inside each triangle between points on two different sides (each such pair belongs to
-    # one triangle only), plus the chain of consecutive points along every edge (once per edge): no
-    # pair appears twice, and the memory is (m (3k+3)^2 / 2) index pairs at most
-    side = np.r_[[0b101, 0b011, 0b110], np.repeat([0b001, 0b010, 0b100], k)]      # sides of each slot
-    ia, ib = np.triu_indices(own.shape[1], 1)
-    cross = (side[ia] & side[ib]) == 0
-    ia, ib = ia[cross], ib[cross]
-    chain = np.concatenate([ue[:, :1], pid, ue[:, 1:]], 1)                         # (e, k+2)
-    a = np.r_[own[:, ia].ravel(), chain[:, :-1].ravel()]
-    b = np.r_[own[:, ib].ravel(), chain[:, 1:].ravel()]
-    N = len(pts)
-    w = np.maximum(np.linalg.norm(pts[a] - pts[b], axis=1), 1e-300)
-    if X is None or src_faces is None:                    # vertex sources only (X ignored)
+class SteinerGraph:
+    """The shortest-path graph on the surface of the triangles ``F`` (m,3) (vertices ``V`` (n,3)) through
+    ``k`` Steiner points on every edge (the graph of the module's docstring), built once and searched
+    from any sources (``search``).
+
+    Attributes: ``k``; ``n`` vertices; ``P`` (N,3) the graph points (the n vertices first); ``own``
+    (m, 3 + 3k) the points on each triangle's boundary; ``ue`` (e,2) the edges, sorted; ``pid`` (e,k)
+    the indices of their points; ``G`` the links both ways as a (N+1, N+1) CSR matrix (mesh units),
+    whose last row is a virtual source that ``search`` joins to surface points (its ``SPARE`` slots are
+    rewritten per search)."""
+
+    SPARE = 256   # link slots of the virtual source (a point in a triangle needs 3 + 3k of them)
+
+    def __init__(self, V, F, k=STEINER):
+        import scipy.sparse as sp
+        V = np.asarray(V, np.float64)
+        F = np.asarray(F, np.int64)
+        n, m = len(V), len(F)
+        self.k, self.n = k, n
+        Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
+        ue, inv = np.unique(Ed, axis=0, return_inverse=True)
+        inv = inv.reshape(3, m).T                                            # (m,3) edge of each side
+        t = np.arange(1, k + 1) / (k + 1)
+        P = V[ue[:, 0]][:, None] * (1 - t)[None, :, None] + V[ue[:, 1]][:, None] * t[None, :, None]
+        pts = np.concatenate([V, P.reshape(-1, 3)])
+        pid = n + np.arange(len(ue) * k).reshape(len(ue), k)
+        own = np.concatenate([F, pid[inv].reshape(m, 3 * k)], 1)              # (m, 3 + 3k)
+        # segments inside each triangle between points on two different sides (each such pair belongs to
+        # one triangle only), plus the chain of consecutive points along every edge (once per edge): no
+        # pair appears twice, and the memory is (m (3k+3)^2 / 2) index pairs at most
+        side = np.r_[[0b101, 0b011, 0b110], np.repeat([0b001, 0b010, 0b100], k)]      # sides of each slot
+        ia, ib = np.triu_indices(own.shape[1], 1)
+        cross = (side[ia] & side[ib]) == 0
+        ia, ib = ia[cross], ib[cross]
+        chain = np.concatenate([ue[:, :1], pid, ue[:, 1:]], 1)                         # (e, k+2)
+        a = np.r_[own[:, ia].ravel(), chain[:, :-1].ravel()]
+        b = np.r_[own[:, ib].ravel(), chain[:, 1:].ravel()]
+        N = len(pts)
+        w = np.maximum(np.linalg.norm(pts[a] - pts[b], axis=1), 1e-300)      # csgraph drops explicit zeros
         G = sp.coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(N, N)).tocsr()
-        dS = dijkstra(G, directed=True, indices=np.unique(np.atleast_1d(src)).astype(np.int64),
-                      min_only=True)
-    else:
-        # a virtual source joined to the source vertices (length 0: 1e-300, as csgraph drops zeros)
+        # the virtual source's row, appended by hand (a COO matrix would sum its repeated self-links)
+        self.G = sp.csr_matrix((np.r_[G.data, np.ones(self.SPARE)],
+                                np.r_[G.indices, np.full(self.SPARE, N, G.indices.dtype)],
+                                np.r_[G.indptr, G.indptr[-1] + self.SPARE]), shape=(N + 1, N + 1))
+        self.P, self.own, self.ue, self.pid, self.N = pts, own, ue, pid, N
+
+    def search(self, src=None, X=None, src_faces=None):
+        """(N,) shortest path lengths from source vertices ``src`` (an index or (s,) indices: the distance
+        to the nearest) and/or surface points: one point ``X`` (3,) in the triangles ``src_faces`` (its
+        star), or points ``X`` (p,3) each in its triangle ``src_faces`` (p,)."""
+        from scipy.sparse.csgraph import dijkstra
+        N = self.N
+        if X is None or src_faces is None:                    # vertex sources only (X ignored)
+            return dijkstra(self.G, directed=True, indices=np.unique(np.atleast_1d(src)).astype(np.int64),
+                            min_only=True)[:N]
+        # the virtual source joined to the source vertices (length 0: 1e-300, as csgraph drops zeros)
         # and to every point on the boundary of each source point's triangle(s) (the straight segment)
         X = np.asarray(X, np.float64)
         if X.ndim == 1:
-            cand = np.unique(own[np.asarray(src_faces)].ravel())
-            wx = np.linalg.norm(pts[cand] - X, axis=1)
+            cand = np.unique(self.own[np.asarray(src_faces)].ravel())
+            wx = np.linalg.norm(self.P[cand] - X, axis=1)
         else:
-            cand = own[np.asarray(src_faces)]                                      # (p, 3 + 3k)
-            wx = np.linalg.norm(pts[cand] - X[:, None], axis=2).ravel()
+            cand = self.own[np.asarray(src_faces)]                                 # (p, 3 + 3k)
+            wx = np.linalg.norm(self.P[cand] - X[:, None], axis=2).ravel()
             cand = cand.ravel()
         if src is not None:
             sv = np.unique(np.atleast_1d(src)).astype(np.int64)
             cand, wx = np.r_[cand, sv], np.r_[wx, np.zeros(len(sv))]
         wx = np.maximum(wx, 1e-300)
-        G = sp.coo_matrix((np.r_[w, w, wx], (np.r_[a, b, np.full(len(cand), N)], np.r_[b, a, cand])),
-                          shape=(N + 1, N + 1)).tocsr()
-        dS = dijkstra(G, directed=True, indices=N)[:N]
-    return dS, pts, own, ue, pid
+        G = self.G
+        if len(cand) <= self.SPARE:
+            # rewrite the virtual source's row in place; its unused slots stay self-links
+            lo = G.indptr[N]
+            G.indices[lo:lo + self.SPARE] = N
+            G.data[lo:lo + self.SPARE] = 1.0
+            G.indices[lo:lo + len(cand)] = cand
+            G.data[lo:lo + len(cand)] = wx
+        else:
+            import scipy.sparse as sp
+            lo = G.indptr[N]
+            G = sp.csr_matrix((np.r_[G.data[:lo], wx], np.r_[G.indices[:lo], cand],
+                               np.r_[G.indptr[:N + 1], lo + len(cand)]), shape=G.shape)
+        return dijkstra(G, directed=True, indices=N)[:N]
+
+
+class SurfacePaths:
+    """Richardson's pair of ``SteinerGraph``: ``k`` (odd, at least 3) and ``(k - 1) / 2`` points per edge on
+    the triangles ``F`` (m,3) (vertices ``V`` (n,3)), built once and searched from any sources
+    (``distances``). The coarse graph's points are the vertices and fine points 1, 3, ... (0-based) of
+    every edge, in the same edge order (both from np.unique of the same sorted edges)."""
+
+    def __init__(self, V, F, k):
+        if k < 3 or k % 2 == 0:
+            raise ValueError(f"Richardson's extrapolation needs an odd k >= 3, got {k}")
+        self.k = k
+        self.fine = SteinerGraph(V, F, k)
+        self.coarse = SteinerGraph(V, F, (k - 1) // 2)
+        n = self.fine.n
+        fine_at = np.full(self.coarse.N, -1, np.int64)
+        fine_at[:n] = np.arange(n)
+        fine_at[self.coarse.pid.ravel()] = self.fine.pid[:, 1::2].ravel()
+        self.fine_at = fine_at
+        self.used = np.unique(F)
+
+    def distances(self, src=None, X=None, src_faces=None):
+        """``(dv (n,) at the vertices, inf off F; dS (N,) at every fine graph point; ev (n,) the estimated
+        excess of the ``k``-point paths at the vertices, the correction subtracted, 0 off F)``: the
+        excess ``d_k - d`` taken as ``(d_(k-1)/2 - d_k) / (2^STEINER_ORDER - 1)`` at the shared points,
+        linearly interpolated along the edge between them (Richardson's extrapolation: no longer an
+        upper bound, about 8x closer on spot, bunny, edgebump)."""
+        fine, n = self.fine, self.fine.n
+        dS = fine.search(src, X, src_faces)
+        dC = self.coarse.search(src, X, src_faces)
+        fine_at = self.fine_at
+        ok = np.isfinite(dC) & np.isfinite(dS[fine_at])
+        corr = np.zeros(len(dS))
+        corr[fine_at[ok]] = (dC[ok] - dS[fine_at[ok]]) / (2.0 ** STEINER_ORDER - 1.0)
+        # fine points 0, 2, ..., k-1 of each edge: the mean of their two neighbours (vertex or shared point)
+        chain = np.concatenate([fine.ue[:, :1], fine.pid, fine.ue[:, 1:]], 1)            # (e, k+2)
+        corr[chain[:, 1:-1:2]] = 0.5 * (corr[chain[:, 0:-2:2]] + corr[chain[:, 2::2]])
+        dS = dS - np.maximum(corr, 0.0)
+        dv = np.full(n, np.inf)
+        ev = np.zeros(n)
+        dv[self.used] = dS[self.used]
+        ev[self.used] = np.maximum(corr[self.used], 0.0)
+        return dv, dS, ev
 
 
 def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapolate=False, excess=False):
     """Shortest paths on the surface of the triangles ``F`` (m,3) (vertices ``V`` (n,3)) from source
     vertices ``src`` (an index or (s,) indices: the distance to the nearest) and/or surface points
-    ``X`` in ``src_faces`` (as ``_steiner_graph``), through ``k`` Steiner points on
+    ``X`` in ``src_faces`` (as ``SteinerGraph.search``), through ``k`` Steiner points on
     every edge: a graph joining every pair of points (vertices and Steiner points) on the boundary of
     each triangle by the straight segment inside it. Each graph path is a path on the surface, so the
     distances are upper bounds of the geodesic ones, and tend to them as ``k`` grows (docs/geodesic.md,
-    "Refined seed"). ``extrapolate`` (``k`` odd): also the graph of ``(k - 1) / 2`` points per edge (its
-    points are every second one of the first), and the excess ``d_k - d`` taken as ``(d_(k-1)/2 - d_k) /
-    (2^STEINER_ORDER - 1)`` at the shared points, linearly interpolated along the edge between them
-    (Richardson's extrapolation: no longer an upper bound, about 8x closer on spot, bunny, edgebump).
+    "Refined seed"). ``extrapolate`` (``k`` odd): Richardson's extrapolation from the graph of
+    ``(k - 1) / 2`` points per edge too (``SurfacePaths``: no longer an upper bound). The graphs are
+    built for this one search: keep a ``SurfacePaths`` to search one mesh many times.
     Returns ``(dv (n,) at the vertices, inf off F; dS (p,) at every graph point; P (p,3) the points;
     own (m, 3 + 3k) the points on each triangle's boundary)``, and with ``excess`` (and
     ``extrapolate``) also ``ev`` (n,): the estimated excess of the ``k``-point paths over the geodesic
     at the vertices (the correction subtracted; 0 off F)."""
     n = len(V)
-    corr = None
-    dS, pts, own, ue, pid = _steiner_graph(V, F, src, X, src_faces, k)
     if extrapolate and k >= 3 and k % 2 == 1:
-        j = (k - 1) // 2
-        dC, _, _, ueC, pidC = _steiner_graph(V, F, src, X, src_faces, j)
-        # the coarse graph's points: the vertices and fine points 1, 3, ... (0-based) of every edge, in the
-        # same edge order (both from np.unique of the same sorted edges)
-        fine_at = np.full(len(dC), -1, np.int64)
-        fine_at[:n] = np.arange(n)
-        fine_at[pidC.ravel()] = pid[:, 1::2].ravel()
-        ok = np.isfinite(dC) & np.isfinite(dS[fine_at])
-        corr = np.zeros(len(dS))
-        corr[fine_at[ok]] = (dC[ok] - dS[fine_at[ok]]) / (2.0 ** STEINER_ORDER - 1.0)
-        # fine points 0, 2, ..., k-1 of each edge: the mean of their two neighbours (vertex or shared point)
-        chain = np.concatenate([ue[:, :1], pid, ue[:, 1:]], 1)                     # (e, k+2)
-        corr[chain[:, 1:-1:2]] = 0.5 * (corr[chain[:, 0:-2:2]] + corr[chain[:, 2::2]])
-        dS = dS - np.maximum(corr, 0.0)
-    dv = np.full(n, np.inf)
-    used = np.unique(F)
-    dv[used] = dS[used]
-    if excess:
+        pair = SurfacePaths(V, F, k)
+        dv, dS, ev = pair.distances(src, X, src_faces)
+        graph = pair.fine
+    else:
+        graph = SteinerGraph(V, F, k)
+        dS = graph.search(src, X, src_faces)
+        dv = np.full(n, np.inf)
+        used = np.unique(F)
+        dv[used] = dS[used]
         ev = np.zeros(n)
-        if corr is not None:
-            ev[used] = np.maximum(corr[used], 0.0)
-        return dv, dS, pts, own, ev
-    return dv, dS, pts, own
+    if excess:
+        return dv, dS, graph.P, graph.own, ev
+    return dv, dS, graph.P, graph.own
 
 
 # The extrapolated distances' mean error measured 3.3-4.5x below the plain k-point paths' excess (the
@@ -149,15 +208,17 @@ def path_points(n_faces, n_edges, budget=None, k_min=PATH_K[-1], k_max=PATH_K[0]
     return None
 
 
-def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_K_MAX):
+def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_K_MAX, cache=None):
     """Geodesic distances on the whole surface of ``F`` (m,3) (vertices ``V`` (n,3), mesh units) to the
     nearest of the source vertices ``sources`` (s,) and the surface points ``X`` (p,3) in the
     triangles ``faces`` (p,): shortest paths through ``k`` (odd) Steiner points per edge,
-    Richardson-extrapolated (``steiner_distances``). With a ``target`` (mean relative error) that the
+    Richardson-extrapolated (``SurfacePaths``). With a ``target`` (mean relative error) that the
     estimate exceeds, or where the plain paths' relative excess at a vertex beyond two mean edges of
     the sources exceeds ``PATH_WORST`` (a bound on the worst error), once more with the ``k`` (odd, at
     most ``k_max``, within ``PATH_BUDGET``) that the excess's fall as ``k^-STEINER_ORDER`` predicts for
-    0.8 of the target (and of ``PATH_WORST``). Returns ``(dist (n,) float64, inf
+    0.8 of the target (and of ``PATH_WORST``). ``cache``: a dict kept by the caller between searches
+    of the same ``V``, ``F``: it keeps the graphs of the last ``k`` used (built once, then each search
+    is two Dijkstra runs) and starts the next search at that ``k``. Returns ``(dist (n,) float64, inf
     off F and where no path reaches; estimate; k used)``: ``estimate`` is the mean relative excess of
     the plain ``k``-point paths over the vertices beyond one mean edge of the sources (the correction
     Richardson subtracts) over ``EXTRAPOLATION_GAIN``: the estimated mean relative error of ``dist``
@@ -168,10 +229,18 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
         np.unique(np.atleast_1d(np.asarray(sources, np.int64)))
     if X is not None and not len(X):
         X = faces = None
-    edge = float(np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean())
+    cache = {} if cache is None else cache
+    if 'edge' not in cache:
+        cache['edge'] = float(np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean())
+    edge = cache['edge']
+    pair = cache.get('paths')
+    if pair is not None and pair.k >= k:
+        k = pair.k                  # a previous search refined to this k: start there
     while True:
-        dv, _, _, _, ev = steiner_distances(V, F, src=src, X=X, src_faces=faces, k=k, extrapolate=True,
-                                            excess=True)
+        if pair is None or pair.k != k:
+            cache.pop('paths', None)                      # one pair of graphs at a time (memory)
+            pair = cache['paths'] = SurfacePaths(V, F, k)
+        dv, _, ev = pair.distances(src, X, faces)
         far = np.isfinite(dv) & (dv > edge)
         rel = ev[far] / (dv[far] + ev[far])
         estimate = float(np.mean(rel)) / EXTRAPOLATION_GAIN if far.any() else 0.0

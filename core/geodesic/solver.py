@@ -1051,6 +1051,7 @@ class PathsChart:
             self.paths_k = max(self.paths_k or 0, path_points(m, ne, budget, PATH_K[-1], PATH_K_MAX) or 0) \
                 or None
         self.size, self.limit, self.nodes, self.metric_passes = 0, None, 0.0, 0
+        self.paths_cache = {}               # the surface paths' graphs, built by the first query
 
     def rasterise(self, mu_mode):
         return self
@@ -1102,6 +1103,7 @@ class Chart:
     def __init__(self, V, F, uv, verts, faces, grid, target, mu_mode='metric', align=True):
         self.verts, self.faces, self.V, self.F = verts, faces, V, F
         self.paths_k = None                     # set by the solver: Steiner points if paths answer
+        self.paths_cache = {}                   # the surface paths' graphs, built by the first query
         self.uv = uv = align_uv(uv) if align else uv
         self.mu_face = mu_f = face_mu(V, F, uv)
         self.area = face_areas(V, F)
@@ -1531,7 +1533,7 @@ class GeodesicSolver:
                 Xp = np.einsum('kc,kcd->kd', pb[mine], ch.V[ch.F[src_faces]]) if mine.any() else None
                 d, path_est[c], k_used = surface_paths(ch.V, ch.F, loc, k0, X=Xp,
                                                        faces=src_faces if mine.any() else None,
-                                                       target=self.error_target)
+                                                       target=self.error_target, cache=ch.paths_cache)
                 path_k.append(k_used)
                 dist_s[ch.verts] = d
                 reached += 1
