@@ -642,6 +642,34 @@ def test_seams_cut_the_surface():
     assert rep['clamped']['above_edges'] >= 0 and rep['islands_reached'] == 1
 
 
+def test_surface_paths_keep_their_graphs_between_queries():
+    """A part answered by surface paths builds its Steiner graphs at the first query and keeps them: a
+    later query runs on the same graphs (no rebuild) and gives what a fresh search gives, whatever
+    came before it (vertex sources, a surface point: the virtual source's links are rewritten)."""
+    from core.geodesic import paths
+    from core.surfaces import icosphere
+    V, F = icosphere(6)
+    gs = geo.GeodesicSolver(V, F)
+    ch = gs.charts[0]
+    assert ch.paths_k and ch.paths_cache == {}
+    d0, _ = gs.distance([0])
+    (k, pair), = ch.paths_cache['graphs'].items()
+    fresh = paths.surface_paths(V, F, [7], k)[0]
+    d1, _ = gs.distance([7])
+    assert ch.paths_cache['graphs'] == {k: pair}
+    np.testing.assert_array_equal(d1[np.isfinite(fresh)], np.maximum(
+        fresh, np.linalg.norm(V - V[7], axis=1))[np.isfinite(fresh)])
+    # a point in triangle 5, then a vertex again: each as a fresh search
+    bary = np.array([[0.2, 0.3, 0.5]])
+    X = bary @ V[F[5]]
+    fp = paths.surface_paths(V, F, None, k, X=X, faces=[5])[0]
+    dp, _ = gs.distance(points=(np.array([5]), bary))
+    assert ch.paths_cache['graphs'] == {k: pair}
+    np.testing.assert_allclose(dp, np.maximum(fp, np.linalg.norm(V - X, axis=1)), rtol=0, atol=1e-12)
+    d2, _ = gs.distance([0])
+    np.testing.assert_array_equal(d2, d0)
+
+
 def test_a_closed_part_is_answered_by_surface_paths():
     """A closed part has no flat chart: without seams it is answered by surface paths on the closed
     surface (here beside an open part, answered by the grid), close to the great circles (the

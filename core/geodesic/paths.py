@@ -217,8 +217,8 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
     the sources exceeds ``PATH_WORST`` (a bound on the worst error), once more with the ``k`` (odd, at
     most ``k_max``, within ``PATH_BUDGET``) that the excess's fall as ``k^-STEINER_ORDER`` predicts for
     0.8 of the target (and of ``PATH_WORST``). ``cache``: a dict kept by the caller between searches
-    of the same ``V``, ``F``: it keeps the graphs of the last ``k`` used (built once, then each search
-    is two Dijkstra runs) and starts the next search at that ``k``. Returns ``(dist (n,) float64, inf
+    of the same ``V``, ``F``: it keeps the graphs of every ``k`` used (built once, then each search
+    is two Dijkstra runs). Returns ``(dist (n,) float64, inf
     off F and where no path reaches; estimate; k used)``: ``estimate`` is the mean relative excess of
     the plain ``k``-point paths over the vertices beyond one mean edge of the sources (the correction
     Richardson subtracts) over ``EXTRAPOLATION_GAIN``: the estimated mean relative error of ``dist``
@@ -233,13 +233,11 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
     if 'edge' not in cache:
         cache['edge'] = float(np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean())
     edge = cache['edge']
-    pair = cache.get('paths')
-    if pair is not None and pair.k >= k:
-        k = pair.k                  # a previous search refined to this k: start there
+    graphs = cache.setdefault('graphs', {})
     while True:
-        if pair is None or pair.k != k:
-            cache.pop('paths', None)                      # one pair of graphs at a time (memory)
-            pair = cache['paths'] = SurfacePaths(V, F, k)
+        pair = graphs.get(k)
+        if pair is None:
+            pair = graphs[k] = SurfacePaths(V, F, k)
         dv, _, ev = pair.distances(src, X, faces)
         far = np.isfinite(dv) & (dv > edge)
         rel = ev[far] / (dv[far] + ev[far])
