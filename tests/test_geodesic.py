@@ -670,6 +670,32 @@ def test_surface_paths_keep_their_graphs_between_queries():
     np.testing.assert_array_equal(d2, d0)
 
 
+def test_steiner_points_trade_accuracy_for_speed_with_an_honest_estimate():
+    """``steiner_points`` fixes the points per edge on islands answered by surface paths (no refinement
+    toward the target): on the closed cow (tests/data), 3 points err several times more than the
+    default, and the estimate says so: at k = 3 the extrapolation gains nothing, so the estimate is
+    the plain excess (measured 1.05x the error against paths at k = 15; dividing by the gain of the
+    finer graphs said 0.42x). Values that are not an odd 3..31 are refused."""
+    from core.io.obj import read_obj
+    from core.mesh.triangulate import triangulate
+    mesh = read_obj(os.path.join(DATA, 'cow.obj'))
+    V, F = mesh.V, mesh.corner_verts[triangulate(mesh.corner_verts, mesh.sizes, mesh.V)[0]]
+    ref, rep = geo.GeodesicSolver(V, F, steiner_points=15).distance([0])
+    assert rep['paths_islands'] == 1 and rep['steiner_points'] == 15
+    far = np.isfinite(ref) & (ref > 0.1 * np.nanmax(ref[np.isfinite(ref)]))
+    out = {}
+    for k in (3, None):
+        d, rep = geo.GeodesicSolver(V, F, steiner_points=k).distance([0])
+        err = float(np.mean(np.abs(d[far] - ref[far]) / ref[far]))
+        out[k] = (err, rep['error_estimate'], rep['steiner_points'])
+    assert out[3][2] == 3 and out[None][2] >= 9
+    assert out[3][0] > 3 * out[None][0], out
+    assert 0.6 < out[3][1] / out[3][0] < 1.7, out
+    for bad in (4, 1, 33, 'many'):
+        with pytest.raises(ConformalError, match='steiner_points'):
+            geo.GeodesicSolver(V, F, steiner_points=bad)
+
+
 def test_a_closed_part_is_answered_by_surface_paths():
     """A closed part has no flat chart: without seams it is answered by surface paths on the closed
     surface (here beside an open part, answered by the grid), close to the great circles (the

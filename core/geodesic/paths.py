@@ -179,7 +179,16 @@ def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapo
 # Richardson correction) on spot and cheburashka at k = 9 (three sources each), 4.9x on spot at k = 15
 # (k = 3 still gives 0.37-0.42 % mean there, against the heat method's 1.6-1.8 %):
 # ``surface_paths`` divides the excess by this to estimate the error it returns (slightly cautious).
+# Not at k = 3: its coarse graph has one point per edge, too few for the extrapolation to gain (the
+# extrapolated error equals the excess there: 0.94-0.96x on spot and cheburashka, three sources each,
+# where k = 5 to 13 gain 2.7-3.3x); ``extrapolation_gain`` says which applies.
 EXTRAPOLATION_GAIN = 2.5
+
+
+def extrapolation_gain(k):
+    """How much closer the extrapolated paths at ``k`` points per edge are than the plain ones (the
+    divisor of the excess in the error estimate)."""
+    return 1.0 if k <= 3 else EXTRAPOLATION_GAIN
 PATH_K = (9, 7, 5, 3)       # Steiner points per edge that ``surface_paths`` tries, best first (odd)
 PATH_K_MAX = 31            # the most Steiner points per edge ``surface_paths`` refines to for its target
 PATH_BUDGET = 12_000_000  # graph links (point pairs, both graphs) ``surface_paths`` may build; ~1 GB peak
@@ -221,7 +230,7 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
     is two Dijkstra runs). Returns ``(dist (n,) float64, inf
     off F and where no path reaches; estimate; k used)``: ``estimate`` is the mean relative excess of
     the plain ``k``-point paths over the vertices beyond one mean edge of the sources (the correction
-    Richardson subtracts) over ``EXTRAPOLATION_GAIN``: the estimated mean relative error of ``dist``
+    Richardson subtracts) over ``extrapolation_gain(k)``: the estimated mean relative error of ``dist``
     (docs/geodesic.md, "Sphere mode")."""
     V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64)
@@ -241,7 +250,7 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
         dv, _, ev = pair.distances(src, X, faces)
         far = np.isfinite(dv) & (dv > edge)
         rel = ev[far] / (dv[far] + ev[far])
-        estimate = float(np.mean(rel)) / EXTRAPOLATION_GAIN if far.any() else 0.0
+        estimate = float(np.mean(rel)) / extrapolation_gain(k) if far.any() else 0.0
         worst = float(rel[dv[far] > 2 * edge].max(initial=0.0))
         if target is None or (estimate <= target and worst <= PATH_WORST):
             return dv, estimate, k

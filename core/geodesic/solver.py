@@ -1245,7 +1245,10 @@ class GeodesicSolver:
     ``PATH_K[-1]`` points per edge); 'auto' (default) takes the paths on an island where they are
     cheaper than the grid its error target needs (``paths_choice``: small, coarse islands whose map
     varies a lot, where the grid grows large and still misses, such as suzanne's), else the grid.
-    Raises ``ConformalError``.
+    ``steiner_points``: the Steiner points per edge (odd, 3..``PATH_K_MAX``) on every island answered by
+    surface paths, without refinement toward ``error_target`` (a speed and accuracy knob: fewer points
+    answer faster and less accurately; the estimate still says how well); None (default): chosen per
+    island and refined toward the target. Raises ``ConformalError``.
 
     Attributes: ``charts`` (list of ``Chart``), ``vert_of`` (N,) input vertex of each split vertex,
     ``face_island`` (m,), ``report`` (dict: set-up figures, including ``seconds`` {flatten,
@@ -1254,10 +1257,15 @@ class GeodesicSolver:
     def __init__(self, V: np.ndarray, F: np.ndarray, uv: np.ndarray | None = None, boundary: str = 'uniform',
                  grid: int | None = None, solver: str = 'auto', mu_mode: str = 'metric',
                  seams: np.ndarray | None = None, error_target: float = ERROR_TARGET, progress=None,
-                 method: str = 'auto'):
+                 method: str = 'auto', steiner_points: int | None = None):
         say = progress or (lambda f, msg: None)
         if method not in METHODS:
             raise ConformalError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
+        if steiner_points is not None and not (isinstance(steiner_points, (int, np.integer))
+                                               and 3 <= steiner_points <= PATH_K_MAX and steiner_points % 2):
+            raise ConformalError(f"steiner_points must be an odd number of points per edge from 3 to "
+                                 f"{PATH_K_MAX}, got {steiner_points!r}")
+        self.steiner_points = None if steiner_points is None else int(steiner_points)
         t0 = time.perf_counter()
         V, F = _check_mesh_arrays(V, F)
         if mu_mode not in MU_MODES:
@@ -1526,6 +1534,13 @@ class GeodesicSolver:
                 # lies where the grid does not resolve the surface (a cell larger than the triangles
                 # there, or no node inside its exact seed: the march from there misses by percents)
                 k0 = ch.paths_k
+                if self.steiner_points:
+                    # the points asked for, or as many as the memory budget allows
+                    if 'fixed_k' not in ch.paths_cache:
+                        from ..mesh.topology import unique_edges
+                        ch.paths_cache['fixed_k'] = path_points(len(ch.F), len(unique_edges(ch.F)[0]),
+                                                                k_max=self.steiner_points) or PATH_K[-1]
+                    k0 = ch.paths_cache['fixed_k']
                 if not k0:
                     from ..mesh.topology import unique_edges
                     k0 = path_points(len(ch.F), len(unique_edges(ch.F)[0])) or PATH_K[-1]
@@ -1533,7 +1548,8 @@ class GeodesicSolver:
                 Xp = np.einsum('kc,kcd->kd', pb[mine], ch.V[ch.F[src_faces]]) if mine.any() else None
                 d, path_est[c], k_used = surface_paths(ch.V, ch.F, loc, k0, X=Xp,
                                                        faces=src_faces if mine.any() else None,
-                                                       target=self.error_target, cache=ch.paths_cache)
+                                                       target=None if self.steiner_points else
+                                                       self.error_target, cache=ch.paths_cache)
                 path_k.append(k_used)
                 dist_s[ch.verts] = d
                 reached += 1
@@ -1925,10 +1941,12 @@ def geodesic_distance(V: np.ndarray, F: np.ndarray, sources=None, points=None, u
                       boundary: str = 'uniform', grid: int | None = None, solver: str = 'auto',
                       mu_mode: str = 'metric', source_radius: float | None = None, calibrate: bool = True,
                       progress=None, seams: np.ndarray | None = None, clamp: bool = True,
-                      error_target: float = ERROR_TARGET, method: str = 'auto') -> tuple[np.ndarray, dict]:
+                      error_target: float = ERROR_TARGET, method: str = 'auto',
+                      steiner_points: int | None = None) -> tuple[np.ndarray, dict]:
     """Geodesic distances from a set of sources to every vertex, by fast marching on the conformal
     plane or surface paths: ``GeodesicSolver(V, F, uv, boundary, grid, solver, mu_mode, seams,
-    error_target, method=method).distance(sources, points, source_radius, calibrate, clamp)``, for one
+    error_target, method=method, steiner_points=steiner_points).distance(sources, points,
+    source_radius, calibrate, clamp)``, for one
     query. V (n,3), F (m,3).
 
     Returns ``(dist, report)``: ``dist`` (n,) float64 in mesh units (NaN at vertices in no triangle,
@@ -1939,7 +1957,7 @@ def geodesic_distance(V: np.ndarray, F: np.ndarray, sources=None, points=None, u
     _parse_sources(len(V), len(F), sources, points)                   # validate before any work
     gs = GeodesicSolver(V, F, uv=uv, boundary=boundary, grid=grid, solver=solver, mu_mode=mu_mode,
                         seams=seams, error_target=error_target, progress=lambda f, m: say(0.4 * f, m),
-                        method=method)
+                        method=method, steiner_points=steiner_points)
     return gs.distance(sources, points, source_radius=source_radius, calibrate=calibrate, clamp=clamp,
                        progress=lambda f, m: say(0.4 + 0.6 * f, m))
 
