@@ -440,6 +440,12 @@ def test_cli_writes_one_distance_per_vertex(tmp_path, capsys):
     rc = main(['geodesic', str(obj), '--source', '3', '--out', str(out)])
     assert rc == 0 and 'surface paths on 1 of 1 islands' in capsys.readouterr().out
     assert np.allclose(np.loadtxt(out), geo.geodesic_distance(Vs, Fs, [3])[0], rtol=1e-7)
+    # fixed Steiner points: named in the summary, the library's answer; a bad count is refused
+    rc = main(['geodesic', str(obj), '--source', '3', '--steiner-points', '5', '--out', str(out)])
+    assert rc == 0 and '(5 points per edge)' in capsys.readouterr().out
+    assert np.allclose(np.loadtxt(out), geo.geodesic_distance(Vs, Fs, [3], steiner_points=5)[0], rtol=1e-7)
+    rc = main(['geodesic', str(obj), '--source', '3', '--steiner-points', '4', '--out', str(bad)])
+    assert rc == 2 and 'steiner_points' in capsys.readouterr().err and not bad.exists()
 
 
 def test_loose_vertex_gets_nan_and_does_not_shift_the_grid(flat):

@@ -31,6 +31,10 @@ def add_arguments(p):
     p.add_argument('--error-target', type=float, default=ERROR_TARGET, metavar='E',
                    help='target for the estimated mean relative error, sets the automatic grid '
                         f'(default {ERROR_TARGET:g}); a result above it prints a warning')
+    p.add_argument('--steiner-points', type=int, default=None, metavar='K',
+                   help='points per edge (odd, 3..31) on the parts answered by surface paths, without '
+                        'refining toward the error target: fewer answer faster and less accurately '
+                        '(default: chosen per part for the target)')
     p.add_argument('--json', action='store_true', help='print the report as JSON (warnings in "warnings")')
 
 
@@ -39,7 +43,7 @@ def run(args):
     F, _ = mesh.triangles()
     dist, report = geodesic_distance(mesh.V, F, sources=np.asarray(args.source, np.int64),
                                      boundary=args.boundary, grid=args.grid, solver=args.solver,
-                                     error_target=args.error_target)
+                                     error_target=args.error_target, steiner_points=args.steiner_points)
     write_values(args.out, dist)
     if args.json:
         print(json.dumps(report))
