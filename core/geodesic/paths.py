@@ -23,9 +23,10 @@ class SteinerGraph:
 
     Attributes: ``k``; ``n`` vertices; ``P`` (N,3) the graph points (the n vertices first); ``own``
     (m, 3 + 3k) the points on each triangle's boundary; ``ue`` (e,2) the edges, sorted; ``pid`` (e,k)
-    the indices of their points; ``G`` the links both ways as a (N+1, N+1) CSR matrix (mesh units),
-    whose last row is a virtual source that ``search`` joins to surface points (its ``SPARE`` slots are
-    rewritten per search)."""
+    the indices of their points; ``G`` the links both ways as a (N+1, N+1) CSR matrix (mesh units) over
+    the points numbered by ``rank`` (N,), whose last row is a virtual source that ``search`` joins to
+    surface points (its ``SPARE`` slots are rewritten per search). ``search`` takes and returns points
+    in the order of ``P``."""
 
     SPARE = 256   # link slots of the virtual source (a point in a triangle needs 3 + 3k of them)
 
@@ -55,6 +56,11 @@ class SteinerGraph:
         b = np.r_[own[:, ib].ravel(), chain[:, 1:].ravel()]
         N = len(pts)
         w = np.maximum(np.linalg.norm(pts[a] - pts[b], axis=1), 1e-300)      # csgraph drops explicit zeros
+        # the graph numbers its points along a Morton (Z-order) curve of their positions, so that the
+        # rows Dijkstra relaxes one after another lie close in memory (spot, k = 9: 64 -> 54 ms a search);
+        # ``rank`` (N,) is each point's number in the graph
+        self.rank = rank = morton_rank(pts)
+        a, b = rank[a], rank[b]
         G = sp.coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(N, N)).tocsr()
         # the virtual source's row, appended by hand (a COO matrix would sum its repeated self-links)
         self.G = sp.csr_matrix((np.r_[G.data, np.ones(self.SPARE)],
@@ -67,10 +73,10 @@ class SteinerGraph:
         to the nearest) and/or surface points: one point ``X`` (3,) in the triangles ``src_faces`` (its
         star), or points ``X`` (p,3) each in its triangle ``src_faces`` (p,)."""
         from scipy.sparse.csgraph import dijkstra
-        N = self.N
+        N, rank = self.N, self.rank
         if X is None or src_faces is None:                    # vertex sources only (X ignored)
-            return dijkstra(self.G, directed=True, indices=np.unique(np.atleast_1d(src)).astype(np.int64),
-                            min_only=True)[:N]
+            sv = rank[np.unique(np.atleast_1d(src)).astype(np.int64)]
+            return dijkstra(self.G, directed=True, indices=sv, min_only=True)[rank]
         # the virtual source joined to the source vertices (length 0: 1e-300, as csgraph drops zeros)
         # and to every point on the boundary of each source point's triangle(s) (the straight segment)
         X = np.asarray(X, np.float64)
@@ -85,6 +91,7 @@ class SteinerGraph:
             sv = np.unique(np.atleast_1d(src)).astype(np.int64)
             cand, wx = np.r_[cand, sv], np.r_[wx, np.zeros(len(sv))]
         wx = np.maximum(wx, 1e-300)
+        cand = rank[cand]
         G = self.G
         if len(cand) <= self.SPARE:
             # rewrite the virtual source's row in place; its unused slots stay self-links
@@ -98,7 +105,21 @@ class SteinerGraph:
             lo = G.indptr[N]
             G = sp.csr_matrix((np.r_[G.data[:lo], wx], np.r_[G.indices[:lo], cand],
                                np.r_[G.indptr[:N + 1], lo + len(cand)]), shape=G.shape)
-        return dijkstra(G, directed=True, indices=N)[:N]
+        return dijkstra(G, directed=True, indices=N)[rank]
+
+
+def morton_rank(P, bits=10):
+    """(N,) int64: the rank of each point of ``P`` (N,3) along a Morton (Z-order) curve of its bounding
+    box quantised to ``2^bits`` cells per axis (ties in the input order)."""
+    lo, span = P.min(axis=0), np.ptp(P, axis=0).max()
+    q = ((P - lo) / (span if span > 0 else 1.0) * ((1 << bits) - 1)).astype(np.int64)
+    code = np.zeros(len(P), np.int64)
+    for bit in range(bits):
+        for axis in range(3):
+            code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
+    rank = np.empty(len(P), np.int64)
+    rank[np.argsort(code, kind='stable')] = np.arange(len(P))
+    return rank
 
 
 class SurfacePaths:
