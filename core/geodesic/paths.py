@@ -57,7 +57,8 @@ class SteinerGraph:
         N = len(pts)
         w = np.maximum(np.linalg.norm(pts[a] - pts[b], axis=1), 1e-300)      # csgraph drops explicit zeros
         # the graph numbers its points along a Morton (Z-order) curve of their positions, so that the
-        # rows Dijkstra relaxes one after another lie close in memory (spot, k = 9: 64 -> 54 ms a search);
+        # rows Dijkstra relaxes one after another lie close in memory (spot, k = 9: 64 -> 54 ms a search
+        # of this graph);
         # ``rank`` (N,) is each point's number in the graph
         self.rank = rank = morton_rank(pts)
         a, b = rank[a], rank[b]
@@ -204,12 +205,6 @@ def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapo
 # extrapolated error equals the excess there: 0.94-0.96x on spot and cheburashka, three sources each,
 # where k = 5 to 13 gain 2.7-3.3x); ``extrapolation_gain`` says which applies.
 EXTRAPOLATION_GAIN = 2.5
-
-
-def extrapolation_gain(k):
-    """How much closer the extrapolated paths at ``k`` points per edge are than the plain ones (the
-    divisor of the excess in the error estimate)."""
-    return 1.0 if k <= 3 else EXTRAPOLATION_GAIN
 PATH_K = (9, 7, 5, 3)       # Steiner points per edge that ``surface_paths`` tries, best first (odd)
 PATH_K_MAX = 31            # the most Steiner points per edge ``surface_paths`` refines to for its target
 PATH_BUDGET = 12_000_000  # graph links (point pairs, both graphs) ``surface_paths`` may build; ~1 GB peak
@@ -218,6 +213,12 @@ PATH_BUDGET = 12_000_000  # graph links (point pairs, both graphs) ``surface_pat
 # mean target (0.07 %) with one vertex 2.4 % off (excess 3.9 %); elsewhere the worst excess is
 # 0.2-1.7 % (spot, cow, cheburashka, box, cylinder, torus) and the worst error 0.6-1.1x it
 PATH_WORST = 0.015
+
+
+def extrapolation_gain(k):
+    """How much closer the extrapolated paths at ``k`` points per edge are than the plain ones (the
+    divisor of the excess in the error estimate)."""
+    return 1.0 if k <= 3 else EXTRAPOLATION_GAIN
 
 
 def path_links(n_faces, n_edges, k):
