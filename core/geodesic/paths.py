@@ -75,9 +75,9 @@ class SteinerGraph:
         star), or points ``X`` (p,3) each in its triangle ``src_faces`` (p,)."""
         from scipy.sparse.csgraph import dijkstra
         N, rank = self.N, self.rank
+        sv = None if src is None else np.unique(np.atleast_1d(src)).astype(np.int64)
         if X is None or src_faces is None:                    # vertex sources only (X ignored)
-            sv = rank[np.unique(np.atleast_1d(src)).astype(np.int64)]
-            return dijkstra(self.G, directed=True, indices=sv, min_only=True)[rank]
+            return dijkstra(self.G, directed=True, indices=rank[sv], min_only=True)[rank]
         # the virtual source joined to the source vertices (length 0: 1e-300, as csgraph drops zeros)
         # and to every point on the boundary of each source point's triangle(s) (the straight segment)
         X = np.asarray(X, np.float64)
@@ -88,8 +88,7 @@ class SteinerGraph:
             cand = self.own[np.asarray(src_faces)]                                 # (p, 3 + 3k)
             wx = np.linalg.norm(self.P[cand] - X[:, None], axis=2).ravel()
             cand = cand.ravel()
-        if src is not None:
-            sv = np.unique(np.atleast_1d(src)).astype(np.int64)
+        if sv is not None:
             cand, wx = np.r_[cand, sv], np.r_[wx, np.zeros(len(sv))]
         wx = np.maximum(wx, 1e-300)
         cand = rank[cand]
@@ -249,7 +248,7 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
     most ``k_max``, within ``PATH_BUDGET``) that the excess's fall as ``k^-STEINER_ORDER`` predicts for
     0.8 of the target (and of ``PATH_WORST``). ``cache``: a dict kept by the caller between searches
     of the same ``V``, ``F``: it keeps the graphs of every ``k`` used (built once, then each search
-    is two Dijkstra runs). Returns ``(dist (n,) float64, inf
+    is two Dijkstra runs), the mean edge and the edge count. Returns ``(dist (n,) float64, inf
     off F and where no path reaches; estimate; k used)``: ``estimate`` is the mean relative excess of
     the plain ``k``-point paths over the vertices beyond one mean edge of the sources (the correction
     Richardson subtracts) over ``extrapolation_gain(k)``: the estimated mean relative error of ``dist``
@@ -277,9 +276,10 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
         if target is None or (estimate <= target and worst <= PATH_WORST):
             return dv, estimate, k
         want = k * max(estimate / (0.8 * target), worst / (0.8 * PATH_WORST)) ** (1.0 / STEINER_ORDER)
-        from ..mesh.topology import unique_edges
-        k_new = path_points(len(F), len(unique_edges(F)[0]), k_min=k + 2,
-                            k_max=min(int(np.ceil(want)) | 1, k_max))
+        if 'n_edges' not in cache:
+            from ..mesh.topology import unique_edges
+            cache['n_edges'] = len(unique_edges(F)[0])
+        k_new = path_points(len(F), cache['n_edges'], k_min=k + 2, k_max=min(int(np.ceil(want)) | 1, k_max))
         if k_new is None:
             return dv, estimate, k
         k, target = k_new, None

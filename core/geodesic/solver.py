@@ -1057,6 +1057,15 @@ class PathsChart:
         return self
 
 
+def _budget_k(ch, k_max=PATH_K[0]):
+    """The most Steiner points per edge up to ``k_max`` (odd) whose graphs fit ``PATH_BUDGET`` on the
+    chart ``ch`` (at least ``PATH_K[-1]``); its edge count is counted once and kept with its graphs."""
+    if 'n_edges' not in ch.paths_cache:
+        from ..mesh.topology import unique_edges
+        ch.paths_cache['n_edges'] = len(unique_edges(ch.F)[0])
+    return path_points(len(ch.F), ch.paths_cache['n_edges'], k_max=k_max) or PATH_K[-1]
+
+
 def paths_choice(ch, method, grid, mu_mode):
     """Steiner points per edge (int) if the chart ``ch`` is to be answered by surface paths
     (``core.geodesic.paths``), else None. 'grid': never; 'paths': always (the most ``path_points``
@@ -1533,18 +1542,12 @@ class GeodesicSolver:
                 # an island answered by surface paths: by choice (``paths_choice``), or because a source
                 # lies where the grid does not resolve the surface (a cell larger than the triangles
                 # there, or no node inside its exact seed: the march from there misses by percents)
-                k0 = ch.paths_k
-                if self.steiner_points:
-                    # the points asked for, or as many as the memory budget allows
-                    if 'fixed_k' not in ch.paths_cache:
-                        from ..mesh.topology import unique_edges
-                        ch.paths_cache['fixed_k'] = path_points(len(ch.F), len(unique_edges(ch.F)[0]),
-                                                                k_max=self.steiner_points) or PATH_K[-1]
-                    k0 = ch.paths_cache['fixed_k']
-                if not k0:
-                    from ..mesh.topology import unique_edges
-                    k0 = path_points(len(ch.F), len(unique_edges(ch.F)[0])) or PATH_K[-1]
+                if not ch.paths_k:
                     unseeded.append(c)
+                # the points asked for (as many as the memory budget allows), the chart's own, or for an
+                # unseeded grid chart the most up to PATH_K[0] that fit
+                k0 = _budget_k(ch, self.steiner_points) if self.steiner_points else \
+                    ch.paths_k or _budget_k(ch)
                 Xp = np.einsum('kc,kcd->kd', pb[mine], ch.V[ch.F[src_faces]]) if mine.any() else None
                 d, path_est[c], k_used = surface_paths(ch.V, ch.F, loc, k0, X=Xp,
                                                        faces=src_faces if mine.any() else None,
