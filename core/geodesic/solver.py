@@ -131,6 +131,22 @@ def face_metric_inverse(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndar
     return np.stack([a, b, c], 1)
 
 
+def metric_anisotropy(ginv: np.ndarray) -> np.ndarray:
+    """How far each triangle's pulled-back metric is from conformal: ``sqrt(l_max / l_min)`` (m,) of the
+    eigenvalues of ``G^-1`` (``face_metric_inverse``, (m,3) as ``(a, b, c)``), the ratio of the longest
+    to the shortest surface length of a unit UV step. 1 for an exactly conformal triangle."""
+    a, b, c = ginv.T
+    half, dev = (a + c) / 2, np.sqrt(((a - c) / 2) ** 2 + b * b)
+    return np.sqrt((half + dev) / np.maximum(half - dev, 1e-300 * half))
+
+
+def metric_excess(aniso: np.ndarray, area: np.ndarray) -> float:
+    """The ``area``-weighted (m,) mean of ``metric_anisotropy - 1`` (m,), each capped at ``ANISO_CAP``:
+    the part of the metric that the directional-speed re-marches do not follow (dimensionless; 0 for
+    a conformal map)."""
+    return float((area * (np.minimum(aniso, ANISO_CAP) - 1.0)).sum() / area.sum())
+
+
 def directional_mu(T, valid, face, ginv):
     """The speed (ny, nx) that makes the isotropic eikonal ``|grad T| = 1 / mu`` agree with the
     anisotropic one ``grad T^T G^-1 grad T = 1`` for the gradient direction ``g`` of a travel-time
@@ -866,6 +882,8 @@ ERR_GRID_C1 = 0.05
 REFLEX_CAP = 6.0
 ERR_RELAX = 0.005      # on-mesh term: ERR_RELAX * area fraction of the under-resolved triangles
 ERR_MESH = 0.1         # mesh term: ERR_MESH * mu_spread (area-weighted mean of the per-triangle spread)
+ERR_ANISO = 0.006      # metric term: ERR_ANISO * metric_excess (area-weighted mean anisotropy - 1)
+ANISO_CAP = 4.0        # a triangle's anisotropy counts at most this much in ``metric_excess`` (slivers)
 TYPICAL_DISTANCE = 0.35  # before a query, the median distance is taken as this times the 3D bbox diagonal
 NODE_BUDGET = 4096 * 4096  # automatic grids of all islands together use at most this many nodes
 
@@ -910,14 +928,16 @@ def grid_coefficient(reflex: float) -> float:
     return ERR_GRID_C0 + ERR_GRID_C1 * min(reflex, REFLEX_CAP)
 
 
-def error_estimate(cell: float, distance: float, spread: float, reflex: float, free: float = 0.0) -> float:
+def error_estimate(cell: float, distance: float, spread: float, reflex: float, free: float = 0.0,
+                   excess: float = 0.0) -> float:
     """Estimated mean relative error (dimensionless) of the distances on a chart whose mean surface
     cell is ``cell`` (``surface_cell`` over the resolved triangles, mesh units), for a query whose
-    median distance is ``distance`` (mesh units), on a map with ``mu_spread`` ``spread`` over a domain
-    with ``reflex_turning`` ``reflex``, with the area fraction ``free`` under-resolved (on-mesh fast
-    marching): ``grid_coefficient(reflex) * cell / distance + ERR_MESH * spread + ERR_RELAX * free``."""
+    median distance is ``distance`` (mesh units), on a map with ``mu_spread`` ``spread`` and
+    ``metric_excess`` ``excess`` over a domain with ``reflex_turning`` ``reflex``, with the area
+    fraction ``free`` under-resolved (on-mesh fast marching): ``grid_coefficient(reflex) * cell /
+    distance + ERR_MESH * spread + ERR_ANISO * excess + ERR_RELAX * free``."""
     return float(grid_coefficient(reflex) * cell / max(distance, 1e-300) + ERR_MESH * spread
-                 + ERR_RELAX * free)
+                 + ERR_ANISO * excess + ERR_RELAX * free)
 
 
 def typical_distance(V: np.ndarray) -> float:
@@ -932,8 +952,10 @@ def default_grid_for_target(V, F, uv, mu_face, spread, reflex, target=ERROR_TARG
     ``typical_distance``; the grid term over the triangles that grid resolves, the others counted by
     the on-mesh term) meets ``target``, at least ``default_grid`` (8 nodes per mean UV edge) and
     ``GRID_AUTO_MIN``, at most ``GRID_AUTO_MAX``. When the mesh term alone uses up the target, the grid
-    terms are only brought to half the mesh term (a finer grid would not help). Returns (grid, limit):
-    ``limit`` None when the target is met, 'cap' when the cap stops it, 'mesh' when the mesh does."""
+    terms are only brought to half the mesh term (a finer grid would not help). The metric term
+    (``ERR_ANISO``) is left out: it does not fall with the grid (a chart where it is large goes to
+    surface paths, ``paths_choice``). Returns (grid, limit, estimate): ``limit`` None when the target
+    is met, 'cap' when the cap stops it, 'mesh' when the mesh does."""
     area = face_areas(V, F)
     ext = float(np.ptp(uv[np.unique(F)], axis=0).max())
     base = max(default_grid(V, F, uv), GRID_AUTO_MIN)
@@ -1077,7 +1099,11 @@ def paths_choice(ch, method, grid, mu_mode):
     run where they take at most about half the march's time, with as many points as that time buys.
     That picks small, coarse islands whose map varies a lot, where the automatic grid grows large
     and its estimate is least reliable (suzanne's face: grid 2240, 0.8-1.9 % mean, 10 s a query), and
-    leaves fine meshes to the grid (bump at n = 65: 2.7M links at k = 9 against 0.8M updates)."""
+    leaves fine meshes to the grid (bump at n = 65: 2.7M links at k = 9 against 0.8M updates).
+    'auto' also gives the paths (the most ``path_points`` allows, if any) a chart whose map is so far from
+    conformal per triangle that its metric term alone (``ERR_ANISO`` times ``metric_excess``) is
+    above half the target: the grid's re-marches do not follow that metric (a given ``uv`` stretched
+    by 1.05-1.3: 0.03-0.44 % mean, growing with the grid), the paths do not use the map at all."""
     if method == 'grid' or (method == 'auto' and grid is not None):
         return None
     from ..mesh.topology import unique_edges
@@ -1087,11 +1113,13 @@ def paths_choice(ch, method, grid, mu_mode):
     marches = 1 + (METRIC_PASSES if mu_mode == 'metric' else 0)
     k = path_points(m, ne, min(PATH_BUDGET, PATH_COST * ch.nodes * marches), PATH_K[0], PATH_K_MAX)
     if k is None:
-        # a grid held at the cap short of the target: the paths at the largest k that fits, if their
-        # expected error is under half the grid's estimate
         kb = path_points(m, ne)
-        if ch.limit == 'cap' and kb is not None and ch.grid_estimate is not None \
-                and PATH_ERROR_9 * (PATH_K[0] / kb) ** STEINER_ORDER < 0.5 * ch.grid_estimate:
+        # a map the grid cannot follow (its metric term alone above half the target), or a grid held
+        # at the cap short of the target whose estimate is over twice the paths' expected error: the
+        # paths at the largest k that fits
+        if kb is not None and (ERR_ANISO * ch.excess > 0.5 * ch.target or (
+                ch.limit == 'cap' and ch.grid_estimate is not None
+                and PATH_ERROR_9 * (PATH_K[0] / kb) ** STEINER_ORDER < 0.5 * ch.grid_estimate)):
             return kb
     return k
 
@@ -1116,9 +1144,13 @@ class Chart:
         self.uv = uv = align_uv(uv) if align else uv
         self.mu_face = mu_f = face_mu(V, F, uv)
         self.area = face_areas(V, F)
-        # the mesh term of the error: none when marching with the exact per-triangle metric
+        # the mesh terms of the error: the smooth mu's spread (none when marching with the exact
+        # per-triangle metric), and the metric's anisotropy, which no march here follows exactly
         self.spread = 0.0 if mu_mode == 'metric' else mu_spread(F, mu_f, self.area)
+        self.metric_inv = face_metric_inverse(V, F, uv)
+        self.excess = metric_excess(metric_anisotropy(self.metric_inv), self.area)
         self.reflex = reflex_turning(uv, F)
+        self.target = target
         self.limit, self.grid_estimate = None, None
         if grid is None:
             grid, self.limit, self.grid_estimate = default_grid_for_target(V, F, uv, mu_f, self.spread,
@@ -1137,7 +1169,7 @@ class Chart:
         else:
             mu = G.interpolate(uv, F, face_values=mu_f)
         self.mu = np.where(valid, np.clip(mu, mu_f.min(), mu_f.max()), 1.0)
-        self.ginv = face_metric_inverse(self.V, F, uv) if mu_mode == 'metric' else None
+        self.ginv = self.metric_inv if mu_mode == 'metric' else None
         if self.ginv is not None:
             # the re-marches change nothing where every triangle is conformal and mu is the same on all
             # of them (an isometric map of a planar mesh): skip them there
@@ -1172,7 +1204,7 @@ class Chart:
         self.P = G.coords(uv)
         self.cell = surface_cell(mu_f, self.area, G.h, ~self.unresolved)
         self.error_estimate = error_estimate(self.cell, typical_distance(self.V), self.spread, self.reflex,
-                                             self.free_frac)
+                                             self.free_frac, self.excess)
         return self
 
     def node_points(self, ii, jj):
@@ -1441,6 +1473,10 @@ class GeodesicSolver:
                     "Steiner points per edge): subdivide the mesh")
         msg = (f"estimated mean error {100 * est:.3g}%{where} is above the target "
                f"{100 * self.error_target:.3g}% (grid {ch.size}")
+        if ERR_ANISO * ch.excess > 0.5 * self.error_target:
+            return msg + (f"; the map alone accounts for {100 * ERR_ANISO * ch.excess:.2g}%: it is far from "
+                          f"conformal on its triangles, mean anisotropy {1 + ch.excess:.3g}): use the "
+                          "automatic grid (surface paths answer such a map), or a conformal map (uv=None)")
         if ch.limit == 'mesh' or ERR_MESH * ch.spread > 0.5 * self.error_target:
             return msg + (f"; the mesh alone accounts for {100 * ERR_MESH * ch.spread:.2g}%: its conformal "
                           "factor varies too much across triangles): subdivide the mesh, or use a more "
@@ -1594,7 +1630,7 @@ class GeodesicSolver:
             dc = dist_s[ch.verts]
             dc = dc[np.isfinite(dc) & (dc > 0)]
             ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.spread,
-                                       ch.reflex, ch.free_frac))
+                                       ch.reflex, ch.free_frac, ch.excess))
         est = max(ests)
         warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w]
         if unseeded:
@@ -1768,11 +1804,7 @@ class GeodesicSolver:
             E = np.sort(np.concatenate([Fc[:, [0, 1]], Fc[:, [1, 2]], Fc[:, [2, 0]]]), 1)
             key = E[:, 0] * len(ch.V) + E[:, 1]
             u, cnt = np.unique(key, return_counts=True)
-            aniso = np.ones(len(Fc))
-            if ch.ginv is not None:
-                a, b, c = ch.ginv.T
-                half, dev = (a + c) / 2, np.sqrt(((a - c) / 2) ** 2 + b * b)
-                aniso = np.sqrt((half + dev) / np.maximum(half - dev, 1e-300 * half))
+            aniso = np.ones(len(Fc)) if ch.ginv is None else metric_anisotropy(ch.ginv)
             W = ch.uv[Fc]
             uv_edge = (np.linalg.norm(W - np.roll(W, 1, axis=1), axis=2)).mean(1)
             cache = ch.fine_cache = {'bkeys': u[cnt == 1], 'edge': mean_edges(ch.V, Fc), 'aniso': aniso,
