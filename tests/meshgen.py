@@ -171,3 +171,21 @@ def cow_head():
     new = np.full(len(m.V), -1)
     new[used] = np.arange(len(used))
     return m.V[used], new[F]
+
+
+def capped_cylinder(n=48, rings=12, r=1.0, height=1.5):
+    """A closed n-sided prism (a CAD cylinder): ``rings`` rows of quads split in two on the side, each cap
+    a fan of n thin triangles (360/n degrees at its centre): ``V`` (n (rings + 1) + 2, 3) with the
+    bottom ring first and the bottom and top centres last, ``F`` outward."""
+    th = 2 * np.pi * np.arange(n) / n
+    z = np.linspace(0.0, height, rings + 1)
+    V = np.c_[np.tile(r * np.cos(th), rings + 1), np.tile(r * np.sin(th), rings + 1), np.repeat(z, n)]
+    i, j = np.meshgrid(np.arange(n), np.arange(rings), indexing='ij')
+    a, b = (j * n + i).ravel(), (j * n + (i + 1) % n).ravel()
+    F = [np.c_[a, b, b + n], np.c_[a, b + n, a + n]]
+    bot, top = len(V), len(V) + 1
+    V = np.r_[V, [[0.0, 0.0, 0.0], [0.0, 0.0, height]]]
+    k = np.arange(n)
+    F += [np.c_[np.full(n, bot), (k + 1) % n, k],
+          np.c_[np.full(n, top), rings * n + k, rings * n + (k + 1) % n]]
+    return V, np.concatenate(F)

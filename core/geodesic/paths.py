@@ -14,6 +14,46 @@ import numpy as np
 
 STEINER_ORDER = 1.85  # the Steiner paths' excess falls as k^-1.85 (measured on spot: k = 4, 10, 16, 30)
 STEINER = 15         # Steiner points per edge in the refined seed's shortest paths (``steiner_distances``)
+GRADE_ANGLE = np.radians(10.0)  # ``edge_grading``: an edge at a corner narrower than this gets more points
+GRADE_MAX = 8        # at most this many times the points
+GRADE_EXTRA = 0.25   # the graded points add at most this fraction to the graph's links (its k^2 terms)
+
+
+def edge_grading(V, F, ue, inv):
+    """Per-edge multipliers (e,) int64 of the Steiner points on the edges ``ue`` (e,2) of the triangles
+    ``F`` (m,3) (``inv`` (m,3): the edge of each side, side ``s`` joining corners ``s`` and ``s + 1``;
+    vertices ``V`` (n,3)): an edge carries ``(k + 1) m_e - 1`` points instead of ``k``. A geodesic that
+    crosses a fan of thin triangles (a CAD cap's 7.5-degree corners) passes many short segments
+    between points spaced by the edges' length, and the paths' excess there is large and falls slowly
+    with ``k`` (the extrapolation and its estimate no longer hold). So an edge whose smallest corner at
+    either end is below ``GRADE_ANGLE`` gets ``m_e = GRADE_ANGLE / angle`` rounded up to a power of 2, at
+    most ``GRADE_MAX`` (1 elsewhere: most meshes are unchanged, or nearly); the angle is lowered until
+    the extra links (``m_a m_b`` per pair of sides) stay within ``GRADE_EXTRA`` of the uniform graph's,
+    so ``path_links`` still bounds the graph within that fraction."""
+    from ..mesh.geometry import corner_angles
+    ang = corner_angles(V, F)
+    amin = np.full(len(ue), np.pi)
+    for s_ in range(3):
+        np.minimum.at(amin, inv[:, s_], np.minimum(ang[:, s_], ang[:, (s_ + 1) % 3]))
+    amin = np.maximum(np.nan_to_num(amin, nan=0.0), 1e-12)
+
+    def mult(limit):
+        want = np.maximum(limit / amin, 1.0)
+        return np.minimum(2.0 ** np.ceil(np.log2(want) - 1e-9), GRADE_MAX).astype(np.int64)
+
+    def extra(mu):
+        mm = mu[inv]
+        return float((mm[:, 0] * mm[:, 1] + mm[:, 1] * mm[:, 2] + mm[:, 0] * mm[:, 2] - 3).sum()) \
+            / (3.0 * max(len(F), 1))
+
+    limit = GRADE_ANGLE
+    if extra(mult(limit)) > GRADE_EXTRA:
+        lo, hi = 0.0, limit                  # the largest angle whose multipliers fit (extra grows with it)
+        for _ in range(30):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if extra(mult(mid)) <= GRADE_EXTRA else (lo, mid)
+        limit = lo
+    return mult(limit)
 
 
 class SteinerGraph:
@@ -21,16 +61,19 @@ class SteinerGraph:
     ``k`` Steiner points on every edge (the graph of the module's docstring), built once and searched
     from any sources (``search``).
 
-    Attributes: ``k``; ``n`` vertices; ``P`` (N,3) the graph points (the n vertices first); ``own``
-    (m, 3 + 3k) the points on each triangle's boundary; ``ue`` (e,2) the edges, sorted; ``pid`` (e,k)
-    the indices of their points; ``G`` the links both ways as a (N+1, N+1) CSR matrix (mesh units) over
-    the points numbered by ``rank`` (N,), whose last row is a virtual source that ``search`` joins to
-    surface points (its ``SPARE`` slots are rewritten per search). ``search`` takes and returns points
-    in the order of ``P``."""
+    Attributes: ``k``; ``n`` vertices; ``P`` (N,3) the graph points (the n vertices first); ``ue``
+    (e,2) the edges, sorted; ``inv`` (m,3) the edge of each triangle's side; ``count`` (e,) the points on
+    each edge (``k``, or ``(k + 1) m_e - 1`` with a ``grade``) and ``start`` (e,) the index of its first
+    (the points of an edge are consecutive, from ``ue[:, 0]`` to ``ue[:, 1]``); without a grade also
+    ``pid`` (e,k) their indices and ``own`` (m, 3 + 3k) the points on each triangle's boundary; ``G``
+    the links both ways as a (N+1, N+1) CSR matrix (mesh units) over the points numbered by ``rank``
+    (N,), whose last row is a virtual source that ``search`` joins to surface points (its ``SPARE``
+    slots are rewritten per search). ``search`` takes and returns points in the order of ``P``.
+    ``grade`` (e,) int: per-edge multipliers over the sorted edges (``edge_grading``), or None."""
 
     SPARE = 256   # link slots of the virtual source (a point in a triangle needs 3 + 3k of them)
 
-    def __init__(self, V, F, k=STEINER):
+    def __init__(self, V, F, k=STEINER, grade=None):
         import scipy.sparse as sp
         V = np.asarray(V, np.float64)
         F = np.asarray(F, np.int64)
@@ -39,21 +82,36 @@ class SteinerGraph:
         Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
         ue, inv = np.unique(Ed, axis=0, return_inverse=True)
         inv = inv.reshape(3, m).T                                            # (m,3) edge of each side
-        t = np.arange(1, k + 1) / (k + 1)
-        P = V[ue[:, 0]][:, None] * (1 - t)[None, :, None] + V[ue[:, 1]][:, None] * t[None, :, None]
-        pts = np.concatenate([V, P.reshape(-1, 3)])
-        pid = n + np.arange(len(ue) * k).reshape(len(ue), k)
-        own = np.concatenate([F, pid[inv].reshape(m, 3 * k)], 1)              # (m, 3 + 3k)
+        count = np.full(len(ue), k, np.int64) if grade is None else (k + 1) * np.asarray(grade, np.int64) - 1
+        start = n + np.r_[0, np.cumsum(count)[:-1]].astype(np.int64)
+        eid = np.repeat(np.arange(len(ue)), count)                           # the edge of each point
+        t = (np.arange(len(eid)) - (start[eid] - n) + 1) / (count[eid] + 1)
+        pts = np.concatenate([V, V[ue[eid, 0]] * (1 - t)[:, None] + V[ue[eid, 1]] * t[:, None]])
         # segments inside each triangle between points on two different sides (each such pair belongs to
         # one triangle only), plus the chain of consecutive points along every edge (once per edge): no
-        # pair appears twice, and the memory is (m (3k+3)^2 / 2) index pairs at most
-        side = np.r_[[0b101, 0b011, 0b110], np.repeat([0b001, 0b010, 0b100], k)]      # sides of each slot
-        ia, ib = np.triu_indices(own.shape[1], 1)
-        cross = (side[ia] & side[ib]) == 0
-        ia, ib = ia[cross], ib[cross]
-        chain = np.concatenate([ue[:, :1], pid, ue[:, 1:]], 1)                         # (e, k+2)
-        a = np.r_[own[:, ia].ravel(), chain[:, :-1].ravel()]
-        b = np.r_[own[:, ib].ravel(), chain[:, 1:].ravel()]
+        # pair appears twice, and the memory is (m (3k+3)^2 / 2) index pairs at most; triangles are
+        # taken by the points on their three sides (one group without a grade)
+        A, B = [], []
+        sig = count[inv]
+        keys, group = np.unique(sig, axis=0, return_inverse=True)
+        group = group.ravel()
+        for g, (c0, c1, c2) in enumerate(keys):
+            fs = np.flatnonzero(group == g)
+            own = np.concatenate([F[fs]] + [start[inv[fs, j]][:, None] + np.arange(c)[None]
+                                            for j, c in enumerate((c0, c1, c2))], 1)
+            side = np.r_[[0b101, 0b011, 0b110], np.repeat([0b001, 0b010, 0b100], [c0, c1, c2])]
+            ia, ib = np.triu_indices(own.shape[1], 1)
+            cross = (side[ia] & side[ib]) == 0
+            A.append(own[:, ia[cross]].ravel())
+            B.append(own[:, ib[cross]].ravel())
+            if grade is None:
+                self.own = own                                               # (m, 3 + 3k), in F's order
+        for c in np.unique(count):
+            es = np.flatnonzero(count == c)
+            chain = np.concatenate([ue[es, :1], start[es][:, None] + np.arange(c)[None], ue[es, 1:]], 1)
+            A.append(chain[:, :-1].ravel())
+            B.append(chain[:, 1:].ravel())
+        a, b = np.concatenate(A), np.concatenate(B)
         N = len(pts)
         w = np.maximum(np.linalg.norm(pts[a] - pts[b], axis=1), 1e-300)      # csgraph drops explicit zeros
         # the graph numbers its points along a Morton (Z-order) curve of their positions, so that the
@@ -67,7 +125,28 @@ class SteinerGraph:
         self.G = sp.csr_matrix((np.r_[G.data, np.ones(self.SPARE)],
                                 np.r_[G.indices, np.full(self.SPARE, N, G.indices.dtype)],
                                 np.r_[G.indptr, G.indptr[-1] + self.SPARE]), shape=(N + 1, N + 1))
-        self.P, self.own, self.ue, self.pid, self.N = pts, own, ue, pid, N
+        self.P, self.F, self.ue, self.inv, self.count, self.start, self.N = pts, F, ue, inv, count, start, N
+        if grade is None:
+            self.pid = start[:, None] + np.arange(k)[None]                    # (e,k)
+        else:
+            self.own = self.pid = None
+
+    def boundary(self, faces):
+        """The points on the boundary of each triangle of ``faces`` (p,): (q,) point indices and (q,) the
+        position in ``faces`` each belongs to (its corners, then the points of its three sides)."""
+        faces = np.asarray(faces, np.int64)
+        if self.own is not None:
+            cand = self.own[faces]
+            return cand.ravel(), np.repeat(np.arange(len(faces)), cand.shape[1])
+        e = self.inv[faces]                                                  # (p,3)
+        cnt = self.count[e].ravel()
+        owner = np.repeat(np.repeat(np.arange(len(faces)), 3), cnt)
+        first = np.repeat(self.start[e].ravel(), cnt)
+        offs = np.arange(len(first)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        cand = np.r_[self.F[faces].ravel(), first + offs]
+        owner = np.r_[np.repeat(np.arange(len(faces)), 3), owner]
+        order = np.argsort(owner, kind='stable')
+        return cand[order], owner[order]
 
     def search(self, src=None, X=None, src_faces=None):
         """(N,) shortest path lengths from source vertices ``src`` (an index or (s,) indices: the distance
@@ -81,13 +160,12 @@ class SteinerGraph:
         # the virtual source joined to the source vertices (length 0: 1e-300, as csgraph drops zeros)
         # and to every point on the boundary of each source point's triangle(s) (the straight segment)
         X = np.asarray(X, np.float64)
+        cand, owner = self.boundary(np.atleast_1d(src_faces))
         if X.ndim == 1:
-            cand = np.unique(self.own[np.asarray(src_faces)].ravel())
+            cand = np.unique(cand)
             wx = np.linalg.norm(self.P[cand] - X, axis=1)
         else:
-            cand = self.own[np.asarray(src_faces)]                                 # (p, 3 + 3k)
-            wx = np.linalg.norm(self.P[cand] - X[:, None], axis=2).ravel()
-            cand = cand.ravel()
+            wx = np.linalg.norm(self.P[cand] - X[owner], axis=1)
         if sv is not None:
             cand, wx = np.r_[cand, sv], np.r_[wx, np.zeros(len(sv))]
         wx = np.maximum(wx, 1e-300)
@@ -125,20 +203,38 @@ def morton_rank(P, bits=10):
 class SurfacePaths:
     """Richardson's pair of ``SteinerGraph``: ``k`` (odd, at least 3) and ``(k - 1) / 2`` points per edge on
     the triangles ``F`` (m,3) (vertices ``V`` (n,3)), built once and searched from any sources
-    (``distances``). The coarse graph's points are the vertices and fine points 1, 3, ... (0-based) of
-    every edge, in the same edge order (both from np.unique of the same sorted edges)."""
+    (``distances``); ``graded``: both with the edge multipliers of ``edge_grading`` (``(k + 1) m_e - 1``
+    and ``(k + 1) / 2 m_e - 1`` points). The coarse graph's points are the vertices and fine points 1,
+    3, ... (0-based) of every edge, in the same edge order (both from np.unique of the same sorted
+    edges)."""
 
-    def __init__(self, V, F, k):
+    def __init__(self, V, F, k, graded=False):
         if k < 3 or k % 2 == 0:
             raise ValueError(f"Richardson's extrapolation needs an odd k >= 3, got {k}")
         self.k = k
-        self.fine = SteinerGraph(V, F, k)
-        self.coarse = SteinerGraph(V, F, (k - 1) // 2)
-        n = self.fine.n
-        fine_at = np.full(self.coarse.N, -1, np.int64)
+        grade = None
+        if graded:
+            F = np.asarray(F, np.int64)
+            Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
+            ue, inv = np.unique(Ed, axis=0, return_inverse=True)
+            grade = edge_grading(np.asarray(V, np.float64), F, ue, inv.reshape(3, len(F)).T)
+        self.fine = fine = SteinerGraph(V, F, k, grade)
+        self.coarse = coarse = SteinerGraph(V, F, (k - 1) // 2, grade)
+        n = fine.n
+        fine_at = np.full(coarse.N, -1, np.int64)
         fine_at[:n] = np.arange(n)
-        fine_at[self.coarse.pid.ravel()] = self.fine.pid[:, 1::2].ravel()
+        e = np.repeat(np.arange(len(coarse.ue)), coarse.count)               # the edge of each coarse point
+        j = np.arange(len(e)) - (coarse.start[e] - n)
+        fine_at[n:] = fine.start[e] + 2 * j + 1
         self.fine_at = fine_at
+        # fine points 0, 2, ... of every edge and their two neighbours along it (a point or an end)
+        e = np.repeat(np.arange(len(fine.ue)), fine.count)
+        j = np.arange(len(e)) - (fine.start[e] - n)
+        even = j % 2 == 0
+        p, e, j = n + np.flatnonzero(even), e[even], j[even]
+        self.even = p
+        self.before = np.where(j > 0, p - 1, fine.ue[e, 0])
+        self.after = np.where(j < fine.count[e] - 1, p + 1, fine.ue[e, 1])
         self.used = np.unique(F)
 
     def distances(self, src=None, X=None, src_faces=None):
@@ -155,8 +251,7 @@ class SurfacePaths:
         corr = np.zeros(len(dS))
         corr[fine_at[ok]] = (dC[ok] - dS[fine_at[ok]]) / (2.0 ** STEINER_ORDER - 1.0)
         # fine points 0, 2, ..., k-1 of each edge: the mean of their two neighbours (vertex or shared point)
-        chain = np.concatenate([fine.ue[:, :1], fine.pid, fine.ue[:, 1:]], 1)            # (e, k+2)
-        corr[chain[:, 1:-1:2]] = 0.5 * (corr[chain[:, 0:-2:2]] + corr[chain[:, 2::2]])
+        corr[self.even] = 0.5 * (corr[self.before] + corr[self.after])
         dS = dS - np.maximum(corr, 0.0)
         dv = np.full(n, np.inf)
         ev = np.zeros(n)
@@ -207,6 +302,7 @@ EXTRAPOLATION_GAIN = 2.5
 PATH_K = (9, 7, 5, 3)       # Steiner points per edge that ``surface_paths`` tries, best first (odd)
 PATH_K_MAX = 31            # the most Steiner points per edge ``surface_paths`` refines to for its target
 PATH_BUDGET = 12_000_000  # graph links (point pairs, both graphs) ``surface_paths`` may build; ~1 GB peak
+# (counted by ``path_links`` without the grading, which adds at most ``GRADE_EXTRA``)
 # ``surface_paths`` also refines when the plain paths' excess at some vertex beyond two mean edges of
 # the sources is above this (relative): on sliver triangles (a thin box's sides, 1:7) k = 9 met the
 # mean target (0.07 %) with one vertex 2.4 % off (excess 3.9 %); elsewhere the worst excess is
@@ -267,7 +363,7 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
     while True:
         pair = graphs.get(k)
         if pair is None:
-            pair = graphs[k] = SurfacePaths(V, F, k)
+            pair = graphs[k] = SurfacePaths(V, F, k, graded=True)
         dv, _, ev = pair.distances(src, X, faces)
         far = np.isfinite(dv) & (dv > edge)
         rel = ev[far] / (dv[far] + ev[far])
