@@ -9,8 +9,9 @@ from ..core.errors import REMEDIES
 BLENDER_REMEDIES = {
     'fill_holes': "enable Fill Holes (or Cut Holes), or mark a seam from each hole to the outer boundary "
                   "(Edge > Mark Seam)",
-    'mark_seams': "mark seams that cut it open (Edge > Mark Seam), for example a loop around it and a seam "
-                  "across each half, or use Sphere mode (Conformal sidebar)",
+    'mark_seams': "set Seams to Automatic (Conformal sidebar: seams through cones), mark seams that cut "
+                  "it open (Edge > Mark Seam), for example a loop around it and a seam across each half, or "
+                  "use Sphere mode (Conformal sidebar)",
     'cut_handles': "mark seams that cut through every handle (Edge > Mark Seam)",
     'use_sphere': "use Sphere mode (Conformal sidebar), or mark a seam that cuts it open (Edge > Mark Seam)",
     'use_disk': "use Conformal Flatten (disk mode), or fill the holes (Mesh > Clean Up > Fill Holes)",

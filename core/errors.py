@@ -30,8 +30,9 @@ CODES = {
 REMEDIES = {
     'fill_holes': "fill the holes (holes='fill', CLI --holes fill), cut them open (holes='cut'), or mark "
                   "a seam from each hole to the outer boundary",
-    'mark_seams': "mark seams that cut it open (for example a seam loop around it plus a seam across each "
-                  "half), or use sphere mode",
+    'mark_seams': "let the tool choose seams through cones (cones='auto', CLI --cones auto), mark seams "
+                  "that cut it open (for example a seam loop around it plus a seam across each half), or use "
+                  "sphere mode",
     'cut_handles': "mark seams that cut through every handle",
     'use_sphere': "use sphere mode, or mark a seam that cuts it open",
     'use_disk': "use disk mode, or fill the holes",
