@@ -853,13 +853,13 @@ def test_a_map_far_from_conformal_goes_to_the_paths_with_an_honest_estimate(bump
     assert gs.charts[0].paths_k is None and gs.charts[0].excess < 0.01
 
 
-def test_surface_paths_grade_the_points_on_fans_of_thin_triangles(monkeypatch):
+def test_surface_paths_grade_the_points_on_fans_of_thin_triangles():
     """A CAD cylinder's caps are fans of 7.5-degree triangles: shortest graph paths across a cap went
     through its centre (the points on the spokes were about three times the fan's width apart), 0.56 %
     mean and 1.94 % max on the bottom rim from a rim vertex, where the exact distance is the chord.
     The spokes now carry twice the points (``edge_grading``): every other edge keeps ``k``, and on a
-    mesh without narrow corners (bump) every edge does; the grading stays within ``GRADE_EXTRA`` more
-    links."""
+    mesh without narrow corners (bump) every edge does; the grading stays within the extra links it is
+    given."""
     from core.geodesic import paths
     from meshgen import capped_cylinder
     V, F = capped_cylinder()
@@ -880,13 +880,12 @@ def test_surface_paths_grade_the_points_on_fans_of_thin_triangles(monkeypatch):
     Eb = np.sort(np.concatenate([Fb[:, [0, 1]], Fb[:, [1, 2]], Fb[:, [2, 0]]]), 1)
     ub, ib = np.unique(Eb, axis=0, return_inverse=True)
     assert (paths.edge_grading(Vb, Fb, ub, ib.reshape(3, -1).T) == 1).all()
-    # the grading adds at most GRADE_EXTRA to the links: the cylinder's spokes add 0.128 (five extra
-    # pairs per fan triangle over three per triangle), so with less allowed no edge is graded
+    # the cylinder's spokes add 0.128 to the links (five extra pairs per fan triangle over three per
+    # triangle): with less allowed, no edge is graded
     mm = g[inv]
     extra = (mm[:, 0] * mm[:, 1] + mm[:, 1] * mm[:, 2] + mm[:, 0] * mm[:, 2] - 3).sum() / (3 * len(F))
     assert extra == pytest.approx(96 * 5 / (3 * len(F))) and extra <= paths.GRADE_EXTRA
-    monkeypatch.setattr(paths, 'GRADE_EXTRA', 0.1)
-    assert (paths.edge_grading(V, F, ue, inv) == 1).all()
+    assert (paths.edge_grading(V, F, ue, inv, extra_max=0.1) == 1).all()
 
 
 def test_surface_paths_on_sliver_triangles_bound_the_worst_vertex():

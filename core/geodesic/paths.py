@@ -16,10 +16,11 @@ STEINER_ORDER = 1.85  # the Steiner paths' excess falls as k^-1.85 (measured on 
 STEINER = 15         # Steiner points per edge in the refined seed's shortest paths (``steiner_distances``)
 GRADE_ANGLE = np.radians(10.0)  # ``edge_grading``: an edge at a corner narrower than this gets more points
 GRADE_MAX = 8        # at most this many times the points
-GRADE_EXTRA = 0.25   # the graded points add at most this fraction to the graph's links (its k^2 terms)
+GRADE_EXTRA = 0.25   # the graded points may always add this fraction to the graph's links (its k^2 terms),
+GRADE_EXTRA_MAX = 15.0  # and up to this much where ``PATH_BUDGET`` has room (a small mesh of slivers)
 
 
-def edge_grading(V, F, ue, inv):
+def edge_grading(V, F, ue, inv, extra_max=GRADE_EXTRA):
     """Per-edge multipliers (e,) int64 of the Steiner points on the edges ``ue`` (e,2) of the triangles
     ``F`` (m,3) (``inv`` (m,3): the edge of each side, side ``s`` joining corners ``s`` and ``s + 1``;
     vertices ``V`` (n,3)): an edge carries ``(k + 1) m_e - 1`` points instead of ``k``. A geodesic that
@@ -27,9 +28,9 @@ def edge_grading(V, F, ue, inv):
     between points spaced by the edges' length, and the paths' excess there is large and falls slowly
     with ``k`` (the extrapolation and its estimate no longer hold). So an edge whose smallest corner at
     either end is below ``GRADE_ANGLE`` gets ``m_e = GRADE_ANGLE / angle`` rounded up to a power of 2, at
-    most ``GRADE_MAX`` (1 elsewhere: most meshes are unchanged, or nearly); the angle is lowered until
-    the extra links (``m_a m_b`` per pair of sides) stay within ``GRADE_EXTRA`` of the uniform graph's,
-    so ``path_links`` still bounds the graph within that fraction."""
+    most ``GRADE_MAX`` (1 elsewhere: most meshes are unchanged, or nearly). The extra links (``m_a m_b``
+    per pair of sides, over the uniform graph's) stay within ``extra_max``: the largest ceiling on
+    ``m_e`` that fits, and if even 2 does not, the angle is lowered until it fits."""
     from ..mesh.geometry import corner_angles
     ang = corner_angles(V, F)
     amin = np.full(len(ue), np.pi)
@@ -37,23 +38,25 @@ def edge_grading(V, F, ue, inv):
         np.minimum.at(amin, inv[:, s_], np.minimum(ang[:, s_], ang[:, (s_ + 1) % 3]))
     amin = np.maximum(np.nan_to_num(amin, nan=0.0), 1e-12)
 
-    def mult(limit):
+    def mult(limit, cap=GRADE_MAX):
         want = np.maximum(limit / amin, 1.0)
-        return np.minimum(2.0 ** np.ceil(np.log2(want) - 1e-9), GRADE_MAX).astype(np.int64)
+        return np.minimum(2.0 ** np.ceil(np.log2(want) - 1e-9), cap).astype(np.int64)
 
     def extra(mu):
         mm = mu[inv]
         return float((mm[:, 0] * mm[:, 1] + mm[:, 1] * mm[:, 2] + mm[:, 0] * mm[:, 2] - 3).sum()) \
             / (3.0 * max(len(F), 1))
 
-    limit = GRADE_ANGLE
-    if extra(mult(limit)) > GRADE_EXTRA:
-        lo, hi = 0.0, limit                  # the largest angle whose multipliers fit (extra grows with it)
-        for _ in range(30):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if extra(mult(mid)) <= GRADE_EXTRA else (lo, mid)
-        limit = lo
-    return mult(limit)
+    cap = GRADE_MAX
+    while cap >= 2:
+        if extra(mult(GRADE_ANGLE, cap)) <= extra_max:
+            return mult(GRADE_ANGLE, cap)
+        cap //= 2
+    lo, hi = 0.0, GRADE_ANGLE         # the largest angle whose doubled points fit (extra grows with it)
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if extra(mult(mid, 2)) <= extra_max else (lo, mid)
+    return mult(lo, 2)
 
 
 class SteinerGraph:
@@ -204,9 +207,10 @@ class SurfacePaths:
     """Richardson's pair of ``SteinerGraph``: ``k`` (odd, at least 3) and ``(k - 1) / 2`` points per edge on
     the triangles ``F`` (m,3) (vertices ``V`` (n,3)), built once and searched from any sources
     (``distances``); ``graded``: both with the edge multipliers of ``edge_grading`` (``(k + 1) m_e - 1``
-    and ``(k + 1) / 2 m_e - 1`` points). The coarse graph's points are the vertices and fine points 1,
-    3, ... (0-based) of every edge, in the same edge order (both from np.unique of the same sorted
-    edges)."""
+    and ``(k + 1) / 2 m_e - 1`` points), adding at most ``GRADE_EXTRA`` to the links or, where
+    ``PATH_BUDGET`` has room for the pair, up to ``GRADE_EXTRA_MAX``. The coarse graph's points are the
+    vertices and fine points 1, 3, ... (0-based) of every edge, in the same edge order (both from
+    np.unique of the same sorted edges)."""
 
     def __init__(self, V, F, k, graded=False):
         if k < 3 or k % 2 == 0:
@@ -217,7 +221,9 @@ class SurfacePaths:
             F = np.asarray(F, np.int64)
             Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
             ue, inv = np.unique(Ed, axis=0, return_inverse=True)
-            grade = edge_grading(np.asarray(V, np.float64), F, ue, inv.reshape(3, len(F)).T)
+            base = path_links(len(F), len(ue), k) + path_links(len(F), len(ue), (k - 1) // 2)
+            room = min(GRADE_EXTRA_MAX, max(GRADE_EXTRA, 0.9 * PATH_BUDGET / base - 1.0))
+            grade = edge_grading(np.asarray(V, np.float64), F, ue, inv.reshape(3, len(F)).T, room)
         self.fine = fine = SteinerGraph(V, F, k, grade)
         self.coarse = coarse = SteinerGraph(V, F, (k - 1) // 2, grade)
         n = fine.n

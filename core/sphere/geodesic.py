@@ -387,9 +387,11 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     nv = int(clamped['below_euclid'] + clamped['above_edges'])
     if chosen == 'paths':
         # the extrapolated paths are no upper bound: where the geodesic is nearly straight they fall
-        # a little below the 3D distance (the blobs: 1.5 % of the vertices); only a clamp by more than
-        # the error target says something is wrong
-        nv = int(((E3 - dist_raw > ERROR_TARGET * E3) | (dist_raw - upper > ERROR_TARGET * upper)).sum())
+        # a little below the 3D distance (the blobs: 1.5 % of the vertices; a capped CAD cylinder: 2.4 %
+        # by 0.1-0.5 %, at 0.07 % mean error and 0.86 % max); only a clamp by more than ten times the
+        # error target says something is wrong (a thin box before the graded points: 5 % max error)
+        off = 10.0 * ERROR_TARGET
+        nv = int(((E3 - dist_raw > off * E3) | (dist_raw - upper > off * upper)).sum())
     if nv > 0.01 * n:
         what = 'the sphere march is' if chosen == 'charts' else 'the surface paths are'
         warnings.append(f"{nv} vertices ({100 * nv / n:.2g}%) fell outside the exact bounds (3D distance, "
