@@ -20,6 +20,14 @@ GRADE_EXTRA = 0.25   # the graded points may always add this fraction to the gra
 GRADE_EXTRA_MAX = 15.0  # and up to this much where ``PATH_BUDGET`` has room (a small mesh of slivers)
 
 
+def mesh_edges(F):
+    """The edges of the triangles ``F`` (m,3): ``(ue (e,2) sorted pairs in np.unique's order, inv (m,3)
+    the edge of each side)``, side ``s`` joining corners ``s`` and ``s + 1``."""
+    Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
+    ue, inv = np.unique(Ed, axis=0, return_inverse=True)
+    return ue, inv.reshape(3, len(F)).T
+
+
 def edge_grading(V, F, ue, inv, extra_max=GRADE_EXTRA):
     """Per-edge multipliers (e,) int64 of the Steiner points on the edges ``ue`` (e,2) of the triangles
     ``F`` (m,3) (``inv`` (m,3): the edge of each side, side ``s`` joining corners ``s`` and ``s + 1``;
@@ -72,19 +80,18 @@ class SteinerGraph:
     the links both ways as a (N+1, N+1) CSR matrix (mesh units) over the points numbered by ``rank``
     (N,), whose last row is a virtual source that ``search`` joins to surface points (its ``SPARE``
     slots are rewritten per search). ``search`` takes and returns points in the order of ``P``.
-    ``grade`` (e,) int: per-edge multipliers over the sorted edges (``edge_grading``), or None."""
+    ``grade`` (e,) int: per-edge multipliers over the sorted edges (``edge_grading``), or None;
+    ``edges``: ``(ue, inv)`` if the caller has them (``mesh_edges``)."""
 
     SPARE = 256   # link slots of the virtual source (a point in a triangle needs 3 + 3k of them)
 
-    def __init__(self, V, F, k=STEINER, grade=None):
+    def __init__(self, V, F, k=STEINER, grade=None, edges=None):
         import scipy.sparse as sp
         V = np.asarray(V, np.float64)
         F = np.asarray(F, np.int64)
-        n, m = len(V), len(F)
+        n = len(V)
         self.k, self.n = k, n
-        Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
-        ue, inv = np.unique(Ed, axis=0, return_inverse=True)
-        inv = inv.reshape(3, m).T                                            # (m,3) edge of each side
+        ue, inv = mesh_edges(F) if edges is None else edges
         count = np.full(len(ue), k, np.int64) if grade is None else (k + 1) * np.asarray(grade, np.int64) - 1
         start = n + np.r_[0, np.cumsum(count)[:-1]].astype(np.int64)
         eid = np.repeat(np.arange(len(ue)), count)                           # the edge of each point
@@ -216,16 +223,16 @@ class SurfacePaths:
         if k < 3 or k % 2 == 0:
             raise ValueError(f"Richardson's extrapolation needs an odd k >= 3, got {k}")
         self.k = k
+        F = np.asarray(F, np.int64)
+        edges = mesh_edges(F)
         grade = None
         if graded:
-            F = np.asarray(F, np.int64)
-            Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
-            ue, inv = np.unique(Ed, axis=0, return_inverse=True)
+            ue, inv = edges
             base = path_links(len(F), len(ue), k) + path_links(len(F), len(ue), (k - 1) // 2)
             room = min(GRADE_EXTRA_MAX, max(GRADE_EXTRA, 0.9 * PATH_BUDGET / base - 1.0))
-            grade = edge_grading(np.asarray(V, np.float64), F, ue, inv.reshape(3, len(F)).T, room)
-        self.fine = fine = SteinerGraph(V, F, k, grade)
-        self.coarse = coarse = SteinerGraph(V, F, (k - 1) // 2, grade)
+            grade = edge_grading(np.asarray(V, np.float64), F, ue, inv, room)
+        self.fine = fine = SteinerGraph(V, F, k, grade, edges)
+        self.coarse = coarse = SteinerGraph(V, F, (k - 1) // 2, grade, edges)
         n = fine.n
         fine_at = np.full(coarse.N, -1, np.int64)
         fine_at[:n] = np.arange(n)
@@ -308,7 +315,8 @@ EXTRAPOLATION_GAIN = 2.5
 PATH_K = (9, 7, 5, 3)       # Steiner points per edge that ``surface_paths`` tries, best first (odd)
 PATH_K_MAX = 31            # the most Steiner points per edge ``surface_paths`` refines to for its target
 PATH_BUDGET = 12_000_000  # graph links (point pairs, both graphs) ``surface_paths`` may build; ~1 GB peak
-# (counted by ``path_links`` without the grading, which adds at most ``GRADE_EXTRA``)
+# (counted by ``path_links`` without the grading, which adds at most ``GRADE_EXTRA``, or what 0.9 of
+# the budget leaves, see ``SurfacePaths``)
 # ``surface_paths`` also refines when the plain paths' excess at some vertex beyond two mean edges of
 # the sources is above this (relative): on sliver triangles (a thin box's sides, 1:7) k = 9 met the
 # mean target (0.07 %) with one vertex 2.4 % off (excess 3.9 %); elsewhere the worst excess is
