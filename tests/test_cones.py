@@ -727,3 +727,18 @@ def test_green_columns_are_the_same_when_the_store_is_full(monkeypatch):
         B[S, np.arange(len(S))] = 1.0
         np.testing.assert_allclose(system.columns(S), system.solve(B), rtol=0, atol=1e-12)
         assert len(system._cols) <= 12 and system._G.shape[1] <= 12
+
+
+def test_needle_triangles_with_no_cone_do_not_crash_the_nudge():
+    """Bump with every 31st triangle's third vertex pushed within 1e-4 of the midpoint of its opposite
+    edge (needles), unwrapped with automatic cones: the placement keeps no cone, and the nudge pass
+    that moves cones away from flipped triangles took the empty cone list as a float array
+    (IndexError). Now it is a fold-free layout with warnings about the needles' scale."""
+    from core import unwrap
+    V, F = make_surface('bump', 33)
+    for f in range(0, len(F), 31):
+        a, b, c = F[f]
+        V[c] = 0.5 * (V[a] + V[b]) + 1e-4 * (V[c] - 0.5 * (V[a] + V[b]))
+    res = unwrap(V, F, cones='auto')
+    assert res.report['flips'] == 0 and res.report['warnings']
+    assert np.isfinite(res.uv).all()

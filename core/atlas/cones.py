@@ -1911,7 +1911,8 @@ def _cones_near_flips(system, Fw, ev, S):
         W = ev['uv'][ev['cut'].F]
         e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
         bad = np.nonzero(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0)[0]
-    if not len(bad):
+    S = np.asarray(S, np.int64)                 # an empty cone list is a float array otherwise
+    if not len(bad) or not len(S):
         return np.zeros(len(S), bool)
     return system.rings(np.unique(Fw[bad]), 1)[S]
 
