@@ -36,7 +36,7 @@ from ..disk.flatten import flatten
 from ..mesh import topology
 from ..mesh.geometry import face_areas
 from ..mesh.repair import repair, zero_area_note
-from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, vertex_mu
+from ..mesh.measures import folded_note, jacobians, measures_from_jacobians, signed_uv_areas, vertex_mu
 from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_mesh, degenerate_faces, loose_edge_count,
                              normalise_scale)
 from .islands import boundary_crossings, seam_pairs, shelf_pack
@@ -145,7 +145,7 @@ def island_warnings(rep: dict, desc: str) -> list:
     ``QC_WARN``, an optimiser that did not converge, a failed certificate."""
     out = []
     if rep.get('flips'):
-        out.append(f"{desc} has {rep['flips']} flipped triangle(s) (not one-to-one)")
+        out.append(f"{desc} has {rep['flips']} flipped triangle(s) (not one-to-one)" + folded_note(rep))
     if rep.get('overlaps'):
         out.append(f"{desc} overlaps itself ({rep['overlaps']} boundary crossing(s))")
     if rep.get('qc_mean') is not None and rep['qc_mean'] > QC_WARN:
@@ -169,7 +169,7 @@ def _disk(V, F, loops, boundary, fit, max_faces, progress, options):
     rep = {'island': 1, 'triangles': int(len(F)), 'vertices': int(len(V)), 'loops': 1,
            **{k: r[k] for k in MEASURE_KEYS if k in r},
            'overlaps': boundary_crossings(res.uv, loops), 'area_3d': float(face_areas(V, F).sum())}
-    for k in ('bound_vertex', 'vertex_ratio', 'bound_note', 'converged', 'iterations'):
+    for k in ('bound_vertex', 'vertex_ratio', 'bound_note', 'converged', 'iterations', 'flips_folded'):
         if k in r:
             rep[k] = r[k]
     rep['seconds'] = r.get('seconds', {}).get('total')

@@ -25,7 +25,8 @@ from ..background import Background
 from ..errors import ConformalError
 from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian
-from ..mesh.measures import local_frames, jacobians_from_frames, measures_from_jacobians, signed_uv_areas
+from ..mesh.measures import (folded_flips, folded_note, local_frames, jacobians_from_frames,
+                             measures_from_jacobians, signed_uv_areas)
 from ..mesh.intrinsic import intrinsic_delaunay
 from ..mesh.solve import Factor, FactorJob, factor_all, fill_order, sub_order
 from .lscm import lscm
@@ -280,7 +281,7 @@ def _warnings(report, qc_limit=QC_WARN):
     """The honest-report warnings (list of str) for a measured map's ``report``."""
     w = []
     if report.get('flips', 0):
-        w.append(f"{report['flips']} flipped (folded) UV triangle(s)")
+        w.append(f"{report['flips']} flipped (folded) UV triangle(s)" + folded_note(report))
     if not report.get('qc_mean', 1.0) <= qc_limit:
         w.append(f"poor conformality: qc_mean {report.get('qc_mean'):.3f} is above {qc_limit}")
     if not np.isfinite(report.get('mu_ratio', np.nan)) or not report.get('mu_ratio', 0) > 0:
@@ -424,19 +425,23 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
         # a zero-area triangle has no Jacobian; it still must not turn over in UV (the sign does not
         # change with the similarity ``normalise_uv`` applies)
         report['degenerate_flips'] = int((signed_uv_areas(uv, F[degenerate]) < 0).sum())
-    return _measured(report, uv, u, F, mask, system.A, system.jacobians, fit, unit, warnings, timings, t0)
+    return _measured(report, uv, u, F, mask, system.A, system.jacobians, fit, unit, warnings, timings, t0,
+                     V=V)
 
 
-def _measured(report, uv, u, F, mask, A, jacobians, fit, unit, warnings, timings, t0):
+def _measured(report, uv, u, F, mask, A, jacobians, fit, unit, warnings, timings, t0, V=None):
     """The ``FlattenResult`` of a map ``uv`` (n,2) with log scale ``u`` (n,) or None: normalised
     (``fit``, ``unit`` the mesh's scale), measured per triangle on ``mask`` (None: all) with the 3D
     areas ``A`` (m,) and ``jacobians(uv)`` (m,2,2), and its report completed (measures, warnings,
-    seconds since ``t0``)."""
+    seconds since ``t0``). With the positions ``V`` (n,3), flipped triangles that are folded over in
+    the mesh itself (``folded_faces``) are counted too (``flips_folded``)."""
     Fm = F if mask is None else F[mask]
     uv = normalise_uv(Fm, uv, (A if mask is None else A[mask]).sum(), fit)
     J = jacobians(uv)
     measured, mu_real = measures_from_jacobians(*((J, A) if mask is None else (J[mask], A[mask])))
     report.update(measured)
+    if V is not None and measured.get('flips'):
+        report['flips_folded'] = folded_flips(V, F, J, mask)
     if u is not None:
         used = np.unique(Fm)
         report['vertex_ratio'] = float(np.exp(u[used].min() - u[used].max()))

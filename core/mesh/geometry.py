@@ -42,6 +42,25 @@ def face_normals_unnormalised(V, F):
     return cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
 
 
+def folded_faces(V, F):
+    """(m,) bool: the triangles folded over in the mesh itself: each one's normal points against the
+    normal of every triangle that shares an edge with it (at least one): a crumpled spot, such as a
+    vertex pushed through the surface. (A conformal map only sees lengths, so it need not flip such
+    a triangle.) Degenerate triangles are not folded."""
+    from .topology import twin_halfedges
+    N = face_normals_unnormalised(V, F)
+    L = norm3(N)
+    N = N / np.where(L > 0, L, 1.0)[:, None]
+    twin = twin_halfedges(F, int(F.max()) + 1 if len(F) else 0)
+    f = np.repeat(np.arange(len(F)), 3)
+    has = twin >= 0
+    g = np.where(has, twin // 3, 0)
+    dot = np.einsum('ij,ij->i', N[f], N[g])
+    nbrs = np.bincount(f[has], minlength=len(F))
+    against = np.bincount(f[has & (dot < 0)], minlength=len(F))
+    return (nbrs > 0) & (against == nbrs) & (L > 0)
+
+
 def face_areas(V, F):
     """Triangle areas ``A`` (m,), in squared mesh units."""
     return 0.5 * norm3(face_normals_unnormalised(V, F))

@@ -1,7 +1,7 @@
 """The measures of docs/math.md §3, for a UV map or a map to the sphere."""
 import numpy as np
 
-from .geometry import cross, norm3
+from .geometry import cross, folded_faces, norm3
 
 
 def _local_frames(P):
@@ -93,8 +93,32 @@ def measures_from_jacobians(J, A):
 
 def uv_measures(V, F, UV):
     """docs/math.md §3 measures of a UV map: dict with faces, flips, mu_ratio, mu_ratio_p1_p99,
-    qc_mean (area-weighted) and qc_max. ``V`` (n,3), ``F`` (m,3), ``UV`` (n,2)."""
-    return measures_from_jacobians(*jacobians(V, F, UV))[0]
+    qc_mean (area-weighted) and qc_max, and with flips ``flips_folded`` (``folded_flips``). ``V``
+    (n,3), ``F`` (m,3), ``UV`` (n,2)."""
+    J, A = jacobians(V, F, UV)
+    rep = measures_from_jacobians(J, A)[0]
+    if rep['flips']:
+        rep['flips_folded'] = folded_flips(V, F, J)
+    return rep
+
+
+def folded_flips(V, F, J, mask=None):
+    """How many of the triangles that the map with Jacobians ``J`` (m,2,2) flips (against the
+    majority's orientation, as ``measures_from_jacobians`` counts them; only on ``mask`` (m,) bool if
+    given) are folded over in the mesh ``V`` (n,3), ``F`` (m,3) itself (``folded_faces``): crumpled
+    spots of the input, where smoothing or cleaning the mesh is the remedy."""
+    det = determinants(J)
+    on = np.ones(len(F), bool) if mask is None else mask
+    flipped = on & (det * np.sign(np.median(det[on])) <= 0)
+    return int((flipped & folded_faces(V, F)).sum())
+
+
+def folded_note(report):
+    """The words a flip warning adds when some flipped triangles are folded over in the mesh itself
+    (``report['flips_folded']``), or ''."""
+    k = report.get('flips_folded', 0)
+    return (f", {k} of them folded over in the mesh itself (their normal opposes their neighbours'): "
+            "smooth or clean the mesh there") if k else ""
 
 
 def signed_uv_areas(uv, F):
