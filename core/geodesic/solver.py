@@ -56,7 +56,7 @@ import numpy as np
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
-from .paths import (PATH_BUDGET, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, path_points,
+from .paths import (PATH_BUDGET, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, path_points, thin_warning,
                     steiner_distances, surface_paths)
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
@@ -1550,7 +1550,7 @@ class GeodesicSolver:
         dist_s = np.full(N, np.inf)
         marches, radii, reached = 0, [], 0
         hybrid, refined = 0, 0
-        path_est, path_k, unseeded = {}, [], []
+        path_est, path_k, unseeded, thin = {}, [], [], []
         active = np.unique(np.r_[self.chart_of_split[src_split], self.face_island[pf]]).astype(np.int64)
         for k, c in enumerate(active):
             say(0.05 + 0.85 * k / len(active), 'marching')
@@ -1590,6 +1590,9 @@ class GeodesicSolver:
                                                        target=None if self.steiner_points else
                                                        self.error_target, cache=ch.paths_cache)
                 path_k.append(k_used)
+                thin.append(thin_warning(ch.paths_cache.get('short'),
+                                         f" on island {c + 1} of {len(self.charts)}" if len(self.charts) > 1
+                                         else ""))
                 dist_s[ch.verts] = d
                 reached += 1
                 continue
@@ -1632,7 +1635,8 @@ class GeodesicSolver:
             ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.spread,
                                        ch.reflex, ch.free_frac, ch.excess))
         est = max(ests)
-        warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w]
+        warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w] + \
+            [w for w in thin if w]
         if unseeded:
             where = "" if len(self.charts) == 1 else \
                 f" on island{'s' if len(unseeded) > 1 else ''} {', '.join(str(c + 1) for c in unseeded)}"

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
-from ..geodesic.paths import PATH_K, PATH_K_MAX, path_points, surface_paths
+from ..geodesic.paths import PATH_K, PATH_K_MAX, path_points, surface_paths, thin_warning
 from ..geodesic.solver import ERROR_TARGET
 from ..mesh.topology import unique_edges
 from ..mesh.validate import check_mesh
@@ -340,10 +340,13 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
             from .map import _count_flips
             flips = int(_count_flips(F, S))
         direct = method == 'auto' and k is not None and (flips > 0 or unresolved > UNRESOLVED_MAX)
+    thin = None
     if direct:
         say(0.3, 'shortest surface paths')
         t = time.perf_counter()
-        dist, estimate, k = surface_paths(V, F, src, k or PATH_K[-1], target=ERROR_TARGET)
+        kept = {}
+        dist, estimate, k = surface_paths(V, F, src, k or PATH_K[-1], target=ERROR_TARGET, cache=kept)
+        thin = thin_warning(kept.get('short'))
         used, buckets, W, chosen = None, 0, None, 'paths'
     else:
         say(0.3, 'marching')
@@ -384,6 +387,8 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
                if k < PATH_K_MAX else f"even {k} Steiner points per edge are too few for this mesh")
         warnings.append(f"the surface paths' error estimate is {100 * estimate:.2g}% (target "
                         f"{100 * ERROR_TARGET:.2g}%): {why}")
+    if thin:
+        warnings.append(thin)
     nv = int(clamped['below_euclid'] + clamped['above_edges'])
     if chosen == 'paths':
         # the extrapolated paths are no upper bound: where the geodesic is nearly straight they fall
