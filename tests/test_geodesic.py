@@ -863,9 +863,7 @@ def test_surface_paths_grade_the_points_on_fans_of_thin_triangles():
     from core.geodesic import paths
     from meshgen import capped_cylinder
     V, F = capped_cylinder()
-    Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
-    ue, inv = np.unique(Ed, axis=0, return_inverse=True)
-    inv = inv.reshape(3, len(F)).T
+    ue, inv = paths.mesh_edges(F)
     g = paths.edge_grading(V, F, ue, inv)
     centre = np.isin(ue, [len(V) - 2, len(V) - 1]).any(1)
     assert (g[centre] == 2).all() and (g[~centre] == 1).all()
@@ -877,9 +875,7 @@ def test_surface_paths_grade_the_points_on_fans_of_thin_triangles():
     assert e.mean() < 2.5e-3 and np.abs(e).max() < 0.012, (e.mean(), np.abs(e).max())
     assert d[len(V) - 2] == pytest.approx(1.0, rel=1e-9)
     Vb, Fb = make_surface('bump', 33)
-    Eb = np.sort(np.concatenate([Fb[:, [0, 1]], Fb[:, [1, 2]], Fb[:, [2, 0]]]), 1)
-    ub, ib = np.unique(Eb, axis=0, return_inverse=True)
-    assert (paths.edge_grading(Vb, Fb, ub, ib.reshape(3, -1).T) == 1).all()
+    assert (paths.edge_grading(Vb, Fb, *paths.mesh_edges(Fb)) == 1).all()
     # the cylinder's spokes add 0.128 to the links (five extra pairs per fan triangle over three per
     # triangle): with less allowed, no edge is graded
     mm = g[inv]

@@ -30,7 +30,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
-from ..mesh.measures import (determinants, folded_note, jacobians, signed_uv_areas, singular_values,
+from ..mesh.measures import (determinants, flip_warning, jacobians, signed_uv_areas, singular_values,
                              uv_measures)
 from ..mesh import topology
 from ..mesh.repair import repair, zero_area_note
@@ -249,7 +249,7 @@ def _island_warnings(rep):
     """The honest-report warnings of one island's measured report (flips, qc_mean, overlaps)."""
     w = list(rep.get('warnings', []))
     if rep.get('flips', 0):
-        w.append(f"{rep['flips']} flipped (folded) UV triangle(s)" + folded_note(rep))
+        w.append(flip_warning(rep))
     if not rep.get('qc_mean', 1.0) <= QC_WARN:
         w.append(f"poor conformality: qc_mean {rep['qc_mean']:.3f} is above {QC_WARN}")
     if rep.get('overlaps', 0):

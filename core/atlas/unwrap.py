@@ -36,7 +36,7 @@ from ..disk.flatten import flatten
 from ..mesh import topology
 from ..mesh.geometry import face_areas
 from ..mesh.repair import repair, zero_area_note
-from ..mesh.measures import folded_note, jacobians, measures_from_jacobians, signed_uv_areas, vertex_mu
+from ..mesh.measures import flip_warning, jacobians, measures_from_jacobians, signed_uv_areas, vertex_mu
 from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_mesh, degenerate_faces, loose_edge_count,
                              normalise_scale)
 from .islands import boundary_crossings, seam_pairs, shelf_pack
@@ -145,7 +145,7 @@ def island_warnings(rep: dict, desc: str) -> list:
     ``QC_WARN``, an optimiser that did not converge, a failed certificate."""
     out = []
     if rep.get('flips'):
-        out.append(f"{desc} has {rep['flips']} flipped triangle(s) (not one-to-one)" + folded_note(rep))
+        out.append(flip_warning(rep, desc))
     if rep.get('overlaps'):
         out.append(f"{desc} overlaps itself ({rep['overlaps']} boundary crossing(s))")
     if rep.get('qc_mean') is not None and rep['qc_mean'] > QC_WARN:

@@ -25,7 +25,7 @@ from ..background import Background
 from ..errors import ConformalError
 from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian
-from ..mesh.measures import (folded_flips, folded_note, local_frames, jacobians_from_frames,
+from ..mesh.measures import (folded_flips, flip_warning, local_frames, jacobians_from_frames,
                              measures_from_jacobians, signed_uv_areas)
 from ..mesh.intrinsic import intrinsic_delaunay
 from ..mesh.solve import Factor, FactorJob, factor_all, fill_order, sub_order
@@ -281,7 +281,7 @@ def _warnings(report, qc_limit=QC_WARN):
     """The honest-report warnings (list of str) for a measured map's ``report``."""
     w = []
     if report.get('flips', 0):
-        w.append(f"{report['flips']} flipped (folded) UV triangle(s)" + folded_note(report))
+        w.append(flip_warning(report))
     if not report.get('qc_mean', 1.0) <= qc_limit:
         w.append(f"poor conformality: qc_mean {report.get('qc_mean'):.3f} is above {qc_limit}")
     if not np.isfinite(report.get('mu_ratio', np.nan)) or not report.get('mu_ratio', 0) > 0:

@@ -30,7 +30,19 @@ def mesh_edges(F):
     return ue, inv.reshape(3, len(F)).T
 
 
-def edge_grading(V, F, ue, inv, extra_max=GRADE_EXTRA):
+def edge_corner_angles(V, F, inv, e):
+    """(e,) the smallest corner angle (radians, at least 1e-12) at either end of each of the ``e`` edges
+    of the triangles ``F`` (m,3) (``inv`` (m,3): the edge of each side, as ``mesh_edges`` gives it;
+    vertices ``V`` (n,3)), over the triangles that share it."""
+    from ..mesh.geometry import corner_angles
+    ang = corner_angles(V, F)
+    amin = np.full(e, np.pi)
+    for s_ in range(3):
+        np.minimum.at(amin, inv[:, s_], np.minimum(ang[:, s_], ang[:, (s_ + 1) % 3]))
+    return np.maximum(np.nan_to_num(amin, nan=0.0), 1e-12)
+
+
+def edge_grading(V, F, ue, inv, extra_max=GRADE_EXTRA, amin=None):
     """Per-edge multipliers (e,) int64 of the Steiner points on the edges ``ue`` (e,2) of the triangles
     ``F`` (m,3) (``inv`` (m,3): the edge of each side, side ``s`` joining corners ``s`` and ``s + 1``;
     vertices ``V`` (n,3)): an edge carries ``(k + 1) m_e - 1`` points instead of ``k``. A geodesic that
@@ -40,13 +52,10 @@ def edge_grading(V, F, ue, inv, extra_max=GRADE_EXTRA):
     either end is below ``GRADE_ANGLE`` gets ``m_e = GRADE_ANGLE / angle`` rounded up to a power of 2, at
     most ``GRADE_MAX`` (1 elsewhere: most meshes are unchanged, or nearly). The extra links (``m_a m_b``
     per pair of sides, over the uniform graph's) stay within ``extra_max``: the largest ceiling on
-    ``m_e`` that fits, and if even 2 does not, the angle is lowered until it fits."""
-    from ..mesh.geometry import corner_angles
-    ang = corner_angles(V, F)
-    amin = np.full(len(ue), np.pi)
-    for s_ in range(3):
-        np.minimum.at(amin, inv[:, s_], np.minimum(ang[:, s_], ang[:, (s_ + 1) % 3]))
-    amin = np.maximum(np.nan_to_num(amin, nan=0.0), 1e-12)
+    ``m_e`` that fits, and if even 2 does not, the angle is lowered until it fits. ``amin``: the
+    edges' ``edge_corner_angles`` if the caller has them."""
+    if amin is None:
+        amin = edge_corner_angles(V, F, inv, len(ue))
 
     def mult(limit, cap=GRADE_MAX):
         want = np.maximum(limit / amin, 1.0)
@@ -234,10 +243,11 @@ class SurfacePaths:
             V = np.asarray(V, np.float64)
             base = path_links(len(F), len(ue), k) + path_links(len(F), len(ue), (k - 1) // 2)
             room = min(GRADE_EXTRA_MAX, max(GRADE_EXTRA, 0.9 * PATH_BUDGET / base - 1.0))
-            grade = edge_grading(V, F, ue, inv, room)
+            amin = edge_corner_angles(V, F, inv, len(ue))
+            grade = edge_grading(V, F, ue, inv, room, amin)
             # the thin triangles the budget left short of their points: the paths' excess there is
             # not what the extrapolation and its estimate assume (``thin_warning``)
-            short = (grade[inv] < edge_grading(V, F, ue, inv, np.inf)[inv]).any(1)
+            short = (grade[inv] < edge_grading(V, F, ue, inv, np.inf, amin)[inv]).any(1)
             if short.any():
                 from ..mesh.geometry import face_areas
                 A = face_areas(V, F)

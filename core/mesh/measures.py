@@ -121,6 +121,16 @@ def folded_note(report):
             "smooth or clean the mesh there") if k else ""
 
 
+def flip_warning(report, subject=None):
+    """The warning (str) for the ``report['flips']`` flipped UV triangles of a measured map, with its
+    ``folded_note``, or None when there are none. ``subject`` (e.g. "island 3") starts the sentence."""
+    n = report.get('flips', 0)
+    if not n:
+        return None
+    words = f"{n} flipped (folded) UV triangle(s)" + folded_note(report)
+    return words if subject is None else f"{subject} has {words}"
+
+
 def signed_uv_areas(uv, F):
     """Signed UV areas (m,) of the triangles ``F`` (m,3) under the map ``uv`` (n,2): positive for a
     counter-clockwise image, in squared UV units."""
