@@ -726,7 +726,7 @@ def test_green_columns_are_the_same_when_the_store_is_full(monkeypatch):
         B = np.zeros((system.n, len(S)))
         B[S, np.arange(len(S))] = 1.0
         np.testing.assert_allclose(system.columns(S), system.solve(B), rtol=0, atol=1e-12)
-        assert len(system._cols) <= 12 and system._G.shape[1] <= 12
+        assert len(system._cols) <= 12 and system._Gt.shape[0] <= 12
 
 
 def test_needle_triangles_with_no_cone_do_not_crash_the_nudge():

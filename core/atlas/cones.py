@@ -165,8 +165,8 @@ class ConeSystem:
         self.eligible = ~bnd
         self.bounds = L2_BOUNDS        # curvature bounds of l2_angles (set by place_cones)
         self.total = 2 * np.pi * self.chi if self.needs_sum else None
-        self._cols = {}                # vertex -> its column in self._G (the Green's columns solved so far)
-        self._G = np.empty((n, 0))
+        self._cols = {}                # vertex -> its row in self._Gt (the Green's columns solved so far)
+        self._Gt = np.empty((0, n))
         self._last = (None, None)      # the last ``columns`` request and its answer (half repeat it)
         self.u0 = self.solve(-self.Omega)
         # per-vertex area (a third of the incident triangles), for area-weighted statistics
@@ -190,12 +190,13 @@ class ConeSystem:
     def columns(self, S):
         """(n,k) Green's columns ``G[:, S]`` (the response of u to unit curvature at each cone).
 
-        Every column is solved once and kept in one (n, capacity) array (``_cols`` maps a vertex to
-        its column there); when ``S`` are the first columns in the order they were added (the
-        greedy placement's case) a view of them is returned, else a gathered copy (C order: the
-        products with it round exactly as with the columns stacked, so the results do not change).
-        Callers must not write into the result. A request for the same cones as the last one gets
-        the same array back (the placement asks for ``u_of`` and the angles of one set in turn)."""
+        Every column is solved once and kept as a row of one (capacity, n) array (``_cols`` maps a
+        vertex to its row there: a column is contiguous, so gathering any k of them reads k blocks
+        instead of k scattered values in each of n rows, half the time of the gather from an (n,
+        capacity) store); the result is a C-ordered (n,k) copy (the products with it round exactly
+        as with the columns stacked, so the results do not change). Callers must not write into
+        the result. A request for the same cones as the last one gets the same array back (the
+        placement asks for ``u_of`` and the angles of one set in turn)."""
         S = [int(s) for s in S]
         if tuple(S) == self._last[0]:
             return self._last[1]
@@ -209,24 +210,22 @@ class ConeSystem:
                 # the store is full: keep only this request's columns (the others are solved again if
                 # asked for; a fine mesh's cone moves ask for thousands, each used once)
                 keep = list(dict.fromkeys(s for s in S if s in self._cols))
-                G = np.empty((self.n, min(limit, max(2 * (len(keep) + len(new)), 8))))
-                G[:, :len(keep)] = self._G[:, [self._cols[s] for s in keep]]
-                self._G, self._cols = G, {s: j for j, s in enumerate(keep)}
+                Gt = np.empty((min(limit, max(2 * (len(keep) + len(new)), 8)), self.n))
+                Gt[:len(keep)] = self._Gt[[self._cols[s] for s in keep]]
+                self._Gt, self._cols = Gt, {s: j for j, s in enumerate(keep)}
             k0 = len(self._cols)
-            if k0 + len(new) > self._G.shape[1]:             # grow the store (doubling, up to the limit)
-                G = np.empty((self.n, max(min(2 * self._G.shape[1], limit), k0 + len(new), 8)))
-                G[:, :k0] = self._G[:, :k0]
-                self._G = G
-            self._G[:, k0:k0 + len(new)] = X
+            if k0 + len(new) > self._Gt.shape[0]:             # grow the store (doubling, up to the limit)
+                Gt = np.empty((max(min(2 * self._Gt.shape[0], limit), k0 + len(new), 8), self.n))
+                Gt[:k0] = self._Gt[:k0]
+                self._Gt = Gt
+            self._Gt[k0:k0 + len(new)] = X.T
             for j, s in enumerate(new):
                 self._cols[s] = k0 + j
         if not S:
             return np.zeros((self.n, 0))
         idx = [self._cols[s] for s in S]
-        if idx == list(range(len(idx))):
-            G = self._G[:, :len(idx)]
-        else:
-            G = np.take(self._G, idx, axis=1)                 # C order, like the view
+        rows = self._Gt[:len(idx)] if idx == list(range(len(idx))) else self._Gt[idx]
+        G = np.ascontiguousarray(rows.T)
         self._last = (tuple(S), G)
         return G
 
