@@ -4,6 +4,7 @@ a dev-only dependency: requirements-dev.txt).
     .venv/bin/python bench/make_refdata.py            # writes tests/data/geodesic_ref_*.npz
     .venv/bin/python bench/make_refdata.py --check    # only the flat-square sanity check
     .venv/bin/python bench/make_refdata.py --closed   # only the closed meshes' and suzanne's files
+    .venv/bin/python bench/make_refdata.py --only ridge   # only one surface's file
 
 Each file ``geodesic_ref_<surface>_<n>.npz`` holds ``sources`` (k,) int32 vertex indices and
 ``dist`` (k, n*n) float32 exact distances from each source to every vertex of
@@ -32,6 +33,7 @@ REFS = (
     ('bump', 129, (0, 8320, 64)),
     ('bump', 65, (0, 2112, 32)),
     ('edgebump', 65, (0, 2112, 32, 2138)),     # 2138: the peak, the vertex of largest angle defect
+    ('bump3', 65, (2112,)),                    # the centre: the interior vertex of largest angle defect
 )
 
 # closed meshes (tests/data/sphere_<name>.npz) and sources: three vertices spread through the index order
@@ -86,10 +88,13 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--check', action='store_true', help='only run the flat-square check')
     ap.add_argument('--closed', action='store_true', help="only the closed meshes' and suzanne's files")
+    ap.add_argument('--only', help='only this surface of REFS (e.g. ridge)')
     args = ap.parse_args(argv)
     check_flat()
     if args.check:
         return 0
+    if args.only:
+        return _surfaces([r for r in REFS if r[0] == args.only])
     for name, sources in CLOSED:
         d = np.load(os.path.join(DATA, f'sphere_{name}.npz'))
         V, F = d['V'].astype(np.float64), d['F'].astype(np.int64)
@@ -109,7 +114,12 @@ def main(argv=None):
           f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
     if args.closed:
         return 0
-    for name, n, sources in REFS:
+    return _surfaces(REFS)
+
+
+def _surfaces(refs):
+    """Write ``geodesic_ref_<surface>_<n>.npz`` for each (surface, n, sources) of ``refs``."""
+    for name, n, sources in refs:
         V, F = make_surface(name, n)
         t = time.perf_counter()
         D = exact_distances(V, F, sources)

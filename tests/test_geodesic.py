@@ -206,6 +206,31 @@ def test_directional_mu_of_a_linear_field():
     assert mu[0, 0] == 1.0
 
 
+def test_directional_mu_over_several_nodes_does_not_see_node_scale_ripples():
+    """The re-marches take their directions at most ``DIRECTION_NODES`` fine: on a finer grid the
+    difference spans ``step`` nodes, which a ripple of wavelength 2 step / k does not reach. A linear
+    field with a ripple of 4 nodes gets the exact directional speed with ``step`` 2 (and with 4),
+    and not with 1 (whose ripple feeds the next pass: the fixed point of the passes drifted on fine
+    grids, edgebump's central source 0.0133 % at 2048, 0.0146 % at 4096). Near the used region's edge
+    and a triangle's edge the wider difference falls back to the one-node one."""
+    ny, nx = 24, 40
+    ii, jj = np.mgrid[0:ny, 0:nx]
+    g = np.array([0.6, -0.8])
+    T = g[0] * jj + g[1] * ii + 10.0 + 0.3 * np.cos(np.pi * jj / 2) + 0.3 * np.cos(np.pi * ii / 2)
+    valid = np.ones((ny, nx), bool)
+    face = np.where(jj < 20, 0, 1)
+    ginv = np.array([[4.0, 1.0, 2.0], [1.0, 0.0, 1.0]])
+    want = np.array([np.sqrt(g[0] ** 2 * a + 2 * g[0] * g[1] * b + g[1] ** 2 * c) for a, b, c in ginv])[face]
+    inner = (ii >= 4) & (ii < ny - 4) & (np.abs(jj - 19.5) > 4) & (jj >= 4) & (jj < nx - 4)
+    for step in (2, 4):
+        mu = geo.directional_mu(T, valid, face, ginv, step)
+        assert np.allclose(mu[inner], want[inner], rtol=1e-12), step
+        assert np.isfinite(mu).all() and (mu > 0).all()
+    mu1 = geo.directional_mu(T, valid, face, ginv)
+    assert np.abs(mu1[inner] / want[inner] - 1).max() > 0.05
+    assert geo.directional_mu(T, valid, face, ginv, 1).tolist() == mu1.tolist()
+
+
 def test_exact_metric_removes_the_mesh_floor():
     """edgebump 65 against exact MMP: the smooth per-vertex mu ('vertex') stalls at a floor set by the
     mesh (measured centre source 0.040 % at grid 512, 0.033 % at 1024), the exact per-triangle metric
@@ -269,6 +294,27 @@ def test_refined_seed_error_falls_with_the_grid_at_edgebumps_peak():
     assert means[0] < 1.5e-4, errs
     assert all(b < a for a, b in zip(means, means[1:])), errs
     assert max(e[1] for e in errs) < 3e-3, errs
+
+
+def test_the_seed_does_not_flip_to_a_worse_one_on_a_finer_grid(monkeypatch):
+    """bump3 65 from its centre (the interior vertex of largest angle defect): at grid 512 the cells there
+    are coarse (2.9 nodes per edge) and the seed is refined; at 1024 (5.8) the plain seed took over and
+    the error rose (0.0106 % to 0.0154 %: a plain seed on the finer grid is worse than the refined one on
+    the coarser). The choice is now read at the coarser of the grid and a ``SEED_NODES`` one, so it stays
+    refined and the error falls (measured 0.0106 %, 0.0073 %, and 0.0060 % at 2048)."""
+    V, F = make_surface('bump3', 65)
+    ref = np.load(os.path.join(DATA, 'geodesic_ref_bump3_65.npz'))
+    s, D = int(ref['sources'][0]), ref['dist'][0].astype(np.float64)
+    errs = []
+    for g in (512, 1024):
+        d, rep = geo.GeodesicSolver(V, F, grid=g).distance([s])
+        assert rep['refined_sources'] == 1, g
+        errs.append(rel_errors(V, d, D, s))
+    assert errs[1][0] < 0.8 * errs[0][0] and errs[0][0] < 1.5e-4, errs
+    monkeypatch.setattr(geo, 'SEED_NODES', 10 ** 9)             # the choice read at the grid itself
+    d, rep = geo.GeodesicSolver(V, F, grid=1024).distance([s])
+    assert rep['refined_sources'] == 0
+    assert rel_errors(V, d, D, s)[0] > errs[0][0], errs
 
 
 def test_steiner_distances_bound_the_geodesic_from_above():

@@ -76,12 +76,14 @@ RIM = 1
 SEED_RADIUS = 24.0
 UNRESOLVED = 2.0     # a triangle whose surface cell h / mu exceeds this times its mean edge is not resolved
 METRIC_PASSES = 2    # mu_mode 'metric': marches with the exact metric after the isotropic first one
+DIRECTION_NODES = 1024  # the re-marches take gradient directions at most this fine (nodes along a side)
 SWEEP_SEED_RADIUS = 36.0
 # Refined seed (docs/geodesic.md, "Refined seed"): where the chart's cell at a source is coarse in
 # surface units (fewer than FINE_NODES nodes per edge of the source's triangles), the seed comes from
 # shortest paths on the mesh through Steiner points, over the triangles within FINE_WINDOW cells (UV
 # radius) of the source, at most FINE_MAX_FACES of them (the nearest).
 FINE_NODES = 4.0
+SEED_NODES = 512      # ... counted as on a grid of at most this many nodes along the longer side
 FINE_WINDOW = 48.0
 FINE_MAX_FACES = 3000
 FINE_ANISO = 1.15     # or where a triangle at the source has a metric anisotropy sqrt(l_max / l_min) above
@@ -147,33 +149,53 @@ def metric_excess(aniso: np.ndarray, area: np.ndarray) -> float:
     return float((area * (np.minimum(aniso, ANISO_CAP) - 1.0)).sum() / area.sum())
 
 
-def directional_mu(T, valid, face, ginv):
+def directional_mu(T, valid, face, ginv, step=1):
     """The speed (ny, nx) that makes the isotropic eikonal ``|grad T| = 1 / mu`` agree with the
     anisotropic one ``grad T^T G^-1 grad T = 1`` for the gradient direction ``g`` of a travel-time
     field ``T`` (ny, nx): ``mu = sqrt(g^T G^-1 g)``, ``G^-1`` (m,3) per triangle (``face_metric_inverse``)
     at each node's triangle ``face`` (ny, nx). The gradient is a central difference where both
     neighbours are finite and ``valid``, else one-sided; nodes with no usable neighbour on either axis
-    get the isotropic ``sqrt(sqrt(det G^-1))``. NaN-free; 1 at unused nodes."""
+    get the isotropic ``sqrt(sqrt(det G^-1))``. NaN-free; 1 at unused nodes.
+
+    ``step`` (cells): the neighbours are ``step`` nodes away (where they lie in the node's triangle;
+    elsewhere the one-node gradient is used). The re-marches are a fixed-point iteration whose gain on a
+    direction error grows as its wavelength shrinks (measured: on a fine grid the passes diverge on
+    anisotropic triangles); a difference over ``step`` nodes keeps the directions at the resolution of
+    a coarser grid (``DIRECTION_NODES``), where the passes settle."""
+    mu1 = _directional_mu(T, valid, face, ginv, 1)
+    if step <= 1:
+        return mu1
+    mu = _directional_mu(T, valid, face, ginv, int(step), strict=True)
+    return np.where(np.isfinite(mu), mu, mu1)
+
+
+def _directional_mu(T, valid, face, ginv, s, strict=False):
+    """``directional_mu`` with neighbours ``s`` nodes away; ``strict``: only neighbours in the node's own
+    triangle, NaN where an axis has none (the caller falls back to ``s = 1``)."""
     Tf = np.where(valid & np.isfinite(T), T, np.nan)
-    pad = np.pad(Tf, 1, constant_values=np.nan)
-    fpad = np.pad(face, 1, constant_values=-1)
-    c = pad[1:-1, 1:-1]
-    fc = fpad[1:-1, 1:-1]
+    pad = np.pad(Tf, s, constant_values=np.nan)
+    fpad = np.pad(face, s, constant_values=-1)
+    c = pad[s:-s, s:-s]
+    fc = fpad[s:-s, s:-s]
 
     def diff(lo, hi, flo, fhi):
         # the gradient inside the node's own triangle: neighbours in another triangle are used only
         # when neither neighbour on that axis is in it (the gradient jumps across triangle edges)
         lo_s = np.where(flo == fc, lo, np.nan)
         hi_s = np.where(fhi == fc, hi, np.nan)
-        none = ~np.isfinite(lo_s) & ~np.isfinite(hi_s)
-        lo, hi = np.where(none, lo, lo_s), np.where(none, hi, hi_s)
+        if strict:
+            lo, hi = lo_s, hi_s
+        else:
+            none = ~np.isfinite(lo_s) & ~np.isfinite(hi_s)
+            lo, hi = np.where(none, lo, lo_s), np.where(none, hi, hi_s)
         both = np.isfinite(lo) & np.isfinite(hi)
         d = np.where(both, 0.5 * (hi - lo), np.nan)
         d = np.where(~both & np.isfinite(hi), hi - c, d)
         return np.where(~both & ~np.isfinite(hi) & np.isfinite(lo), c - lo, d)
 
-    gx = diff(pad[1:-1, :-2], pad[1:-1, 2:], fpad[1:-1, :-2], fpad[1:-1, 2:])
-    gy = diff(pad[:-2, 1:-1], pad[2:, 1:-1], fpad[:-2, 1:-1], fpad[2:, 1:-1])
+    n2 = 2 * s
+    gx = diff(pad[s:-s, :-n2], pad[s:-s, n2:], fpad[s:-s, :-n2], fpad[s:-s, n2:])
+    gy = diff(pad[:-n2, s:-s], pad[n2:, s:-s], fpad[:-n2, s:-s], fpad[n2:, s:-s])
     nrm = np.hypot(gx, gy)
     f = np.where(face >= 0, face, 0)
     a, b, cc = ginv[f, 0], ginv[f, 1], ginv[f, 2]
@@ -182,6 +204,8 @@ def directional_mu(T, valid, face, ginv):
     with np.errstate(invalid='ignore', divide='ignore'):
         x, y = gx / nrm, gy / nrm
         mu = np.sqrt(np.maximum(a * x * x + 2 * b * x * y + cc * y * y, 1e-300))
+    if strict:
+        return np.where(valid & (face >= 0), np.where(ok, mu, np.nan), 1.0)
     mu = np.where(ok, mu, iso)
     return np.where(valid & (face >= 0), mu, 1.0)
 
@@ -1760,7 +1784,8 @@ class GeodesicSolver:
             for _ in range(passes):
                 # march again with the exact per-triangle metric, for the gradient direction of the
                 # previous pass (docs/geodesic.md, "Exact metric")
-                sp_ = directional_mu(np.where(march_on, Tg, np.inf), march_on, G.face, ch.ginv)
+                sp_ = directional_mu(np.where(march_on, Tg, np.inf), march_on, G.face, ch.ginv,
+                                     max(1, max(G.shape) // DIRECTION_NODES))
                 phi2 = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * sp_, h_far)
                 phi2 = np.minimum(phi2, h_far)
                 phi2 = np.where(seed, np.minimum(phi2, -1e-9 * G.h), np.maximum(phi2, 1e-9 * G.h))
@@ -1829,6 +1854,11 @@ class GeodesicSolver:
                 continue
             mu_min = float(ch.mu_face[star].min())
             per_edge = float(cache['edge'][star].mean()) * mu_min / h       # nodes per edge at the source
+            if ch.ginv is not None:
+                # read at the coarser of this grid and a SEED_NODES one: where the metric varies, a plain
+                # seed on a finer grid can be worse than the refined one on a coarser grid, so the choice
+                # must not flip as the grid grows (a similarity chart's straight segments are exact)
+                per_edge *= min(1.0, SEED_NODES / max(G.shape))
             if per_edge >= FINE_NODES and not (cache['aniso'][star] > FINE_ANISO).any():
                 continue
             # the window: triangles within FINE_WINDOW cells (UV) or FINE_EDGES mean edges (3D, the same
