@@ -767,7 +767,9 @@ def test_a_closed_part_is_answered_by_surface_paths():
     assert rep['paths_islands'] == 1 and rep['islands_reached'] == 2
     assert -0.01 < e.min() and e.max() < 1e-9 and np.abs(e).mean() < 0.005, (e.min(), e.max())
     db, _ = geo.GeodesicSolver(Vb, Fb).distance([500])
-    np.testing.assert_allclose(d[len(V):], db, rtol=1e-12)          # the open part: unchanged
+    # the open part: unchanged, to round-off (alone, its coordinates are not shifted by 5 and scaled
+    # with the sphere's: under numpy 2.4 one value differs by 1.06e-12 relative on this machine)
+    np.testing.assert_allclose(d[len(V):], db, rtol=1e-10)
     with pytest.raises(ConformalError) as exc:
         geo.geodesic_distance(V, F, [0], grid=256, method='grid')
     assert exc.value.code == 'no_boundary' and 'sphere' in str(exc.value)
