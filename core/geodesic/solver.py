@@ -199,14 +199,13 @@ def _directional_mu(T, valid, face, ginv, s, strict=False):
     nrm = np.hypot(gx, gy)
     f = np.where(face >= 0, face, 0)
     a, b, cc = ginv[f, 0], ginv[f, 1], ginv[f, 2]
-    iso = np.sqrt(np.sqrt(np.maximum(a * cc - b * b, 1e-300)))
     ok = np.isfinite(nrm) & (nrm > 0)
     with np.errstate(invalid='ignore', divide='ignore'):
         x, y = gx / nrm, gy / nrm
         mu = np.sqrt(np.maximum(a * x * x + 2 * b * x * y + cc * y * y, 1e-300))
     if strict:
         return np.where(valid & (face >= 0), np.where(ok, mu, np.nan), 1.0)
-    mu = np.where(ok, mu, iso)
+    mu = np.where(ok, mu, np.sqrt(np.sqrt(np.maximum(a * cc - b * b, 1e-300))))   # isotropic fallback
     return np.where(valid & (face >= 0), mu, 1.0)
 
 
