@@ -17,9 +17,10 @@ $(STAMP): requirements.txt requirements-dev.txt
 demo: $(STAMP)
 	$(PY) tools/demo.py --out out/demo
 
-# CONFORMAL_NO_SKIP=1: a skipped test fails the run (tests/conftest.py).
+# CONFORMAL_NO_SKIP=1: a skipped test fails the run. Blender's user resources go to a temporary folder
+# of the run's own (tests/conftest.py), removed at its end.
 test: $(STAMP)
-	BLENDER_USER_RESOURCES=$$(mktemp -d) CONFORMAL_NO_SKIP=1 $(PY) -m pytest -q tests
+	CONFORMAL_NO_SKIP=1 $(PY) -m pytest -q tests
 
 lint: $(STAMP)
 	$(PY) -m ruff check .
@@ -40,7 +41,7 @@ test-numpy2: $(NP2)/.installed
 # Debian trixie root that tools/py313.sh builds once per requirements hash (needs root and Debian packages).
 test-blender52:
 	bash tools/py313.sh setup
-	bash tools/py313.sh run sh -c 'BLENDER_USER_RESOURCES=$$(mktemp -d) CONFORMAL_NO_SKIP=1 python -m pytest -q tests'
+	bash tools/py313.sh run sh -c 'CONFORMAL_NO_SKIP=1 python -m pytest -q tests'
 
 bench: $(STAMP)
 	$(PY) bench/flatten_table.py

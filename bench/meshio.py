@@ -9,12 +9,13 @@ Timings are best-of-``repeat`` wall-clock seconds on a shared machine: noisy."""
 import argparse
 import os
 import sys
-import tempfile
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
-os.environ.setdefault('BLENDER_USER_RESOURCES', tempfile.mkdtemp(prefix='cf-bench-user-'))
+from tools.blender_user import private_user_resources  # noqa: E402
+
+private_user_resources('cf-bench-user-')
 
 import numpy as np  # noqa: E402
 

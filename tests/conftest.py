@@ -12,11 +12,11 @@ DATA = os.path.join(ROOT, 'tests', 'data')
 # --- Blender (bpy) fixtures ------------------------------------------------------------------------
 # Isolate Blender from the user's configuration. This must happen before anything imports bpy, and
 # conftest is imported before the test modules. `make test` sets it too.
-import tempfile  # noqa: E402
-
 import pytest  # noqa: E402
 
-os.environ.setdefault('BLENDER_USER_RESOURCES', tempfile.mkdtemp(prefix='cf-blender-user-'))
+from tools.blender_user import private_user_resources  # noqa: E402
+
+private_user_resources('cf-blender-user-')
 
 
 @pytest.fixture(scope='session')

@@ -16,12 +16,13 @@ import json
 import os
 import shutil
 import sys
-import tempfile
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
-os.environ.setdefault('BLENDER_USER_RESOURCES', tempfile.mkdtemp(prefix='cf-demo-user-'))
+from tools.blender_user import private_user_resources  # noqa: E402
+
+private_user_resources('cf-demo-user-')
 
 import numpy as np  # noqa: E402
 
