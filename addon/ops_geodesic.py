@@ -248,6 +248,7 @@ def geodesic_object(context, obj=None, source='AUTO', grid=0, boundary='UNIFORM'
             'boundary': boundary, 'flattening': origin, 'grid': [nx, ny],
             'cell': rep['cell'], 'masked_fraction': rep['masked_fraction'], 'solver': rep['solver'],
             'paths_islands': rep['paths_islands'], 'steiner_points': rep['steiner_points'],
+            'planar_islands': rep['planar_islands'],
             'distance_range': [lo, hi], 'bands': int(bands), 'mesh_hash': digest,
             'islands': rep['islands'], 'islands_reached': rep['islands_reached'],
             'unreached_vertices': int((~ok & md_used(md)).sum()), 'use_seams': bool(use_seams),
@@ -274,8 +275,10 @@ def summary_line(r):
     """One line for the status bar."""
     solver = "scikit-fmm" if r['solver'] == 'skfmm' else "numpy sweeping"
     flat = "reused flattening" if r['flattening'] != 'computed' else f"flattened ({r['boundary'].lower()})"
+    how = "exact (flat mesh, no grid)" if r.get('planar_islands') == r.get('islands_reached') else \
+        f"grid {r['grid'][0]}x{r['grid'][1]} ({solver})"
     return (f"Geodesic distance on {r['object']!r} from {r['source_description']}: max "
-            f"{r['distance_range'][1]:.4g}, grid {r['grid'][0]}x{r['grid'][1]} ({solver}), {flat}, "
+            f"{r['distance_range'][1]:.4g}, {how}, {flat}, "
             f"{r['seconds']['total']:.2f} s, estimated mean error {100 * r['error_estimate']:.2g}%")
 
 
@@ -335,7 +338,8 @@ class ConformalGeodesicSettings(bpy.types.PropertyGroup):
 GEODESIC_ROWS = [
     ("Sources", 'source_description'),
     ("Max distance", lambda r: f"{r['distance_range'][1]:.4g}"),
-    ("Grid", lambda r: (f"surface paths, {r['steiner_points']} points per edge" if r.get('paths_islands')
+    ("Grid", lambda r: ("none: flat, exact" if r.get('planar_islands') == r.get('islands_reached')
+                        else f"surface paths, {r['steiner_points']} points per edge" if r.get('paths_islands')
                         == r.get('islands_reached') and r.get('steiner_points')
                         else f"{r['grid'][0]} x {r['grid'][1]}")),
     ("Solver", 'solver'),

@@ -312,6 +312,8 @@ def where_worst(name, grid, solver, sets, D, keep, dists, bnd, k):
     Vs = solver.Vs
     info = np.full((len(Vs), 3), np.nan)                  # on-mesh, cell/edge, anisotropy per split vertex
     for ch in solver.charts:
+        if getattr(ch, 'grid', None) is None:          # no grid: surface paths, or exact on a flat part
+            continue
         ratio = (ch.grid.h / ch.mu_face) / mean_edges(ch.V, ch.F)
         an = np.ones(len(ch.F))
         if ch.ginv is not None:
@@ -421,7 +423,8 @@ def run_mesh(name, grids, rows, calib, plot, sphere=False):
 
     D = {k: reduce(v) for k, v in D.items()}
     upper = {k: reduce(v) for k, v in upper.items()}
-    g_def = max(c.size for c in gs.charts)
+    g_def = max(c.size for c in gs.charts) or \
+        ('exact' if all(type(c).__name__ == 'PlanarChart' for c in gs.charts) else 0)   # flat: no grid
     d, tq, rep = ours(gs)
     label = 'ours' if SKIP_DEFAULT else 'ours default'
     evaluate(f'ours default ({g_def})', label, g_def, d, t_setup, tq, rep)

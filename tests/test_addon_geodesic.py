@@ -285,3 +285,34 @@ def test_parts_are_islands_and_seams_cut(addon, bl):
     assert (d2[eq] <= chords * (1 + 1e-9)).all() and (d2[eq] > 0.98 * chords).all(), d2[eq]
     from conformal_flatten.addon.ops_geodesic import GEODESIC_ROWS
     assert dict(GEODESIC_ROWS)["Grid"](rep).startswith('surface paths')
+
+
+def test_a_flat_mesh_is_measured_exactly_without_a_grid(addon, bl):
+    """An L-shaped flat mesh: distances round the inner corner are exact, and the panel says so."""
+    n = 9
+    x, y = np.meshgrid(np.linspace(0, 2, n), np.linspace(0, 2, n))
+    V = np.c_[x.ravel(), y.ravel(), np.zeros(n * n)]
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    Q = np.c_[a, b, d, c]
+    Q = Q[~((V[Q].mean(1)[:, :2] > 1.0).all(1))]                 # the square (1,2)x(1,2) removed
+    used = np.unique(Q)
+    remap = np.full(len(V), -1)
+    remap[used] = np.arange(len(used))
+    V, Q = V[used], remap[Q]
+    obj = bl.mesh_object('L', V, Q)
+    src = int(np.argmin(np.hypot(V[:, 0] - 2.0, V[:, 1])))           # the corner (2, 0)
+    select_vertices(obj, [src])
+    assert bpy.ops.mesh.conformal_geodesic_distance(grid=0) == {'FINISHED'}
+    bpy.ops.object.mode_set(mode='OBJECT')
+    rep = report_of(obj.data)
+    assert rep['planar_islands'] == rep['islands_reached'] == 1 and not rep['warnings']
+    corner = np.array([1.0, 1.0])
+    S = V[src, :2]
+    shade = (V[:, 0] <= 1.0 + 1e-9) & (V[:, 1] > 1.0 + (V[:, 0] - 1.0) * (1.0 - S[1]) / (1.0 - S[0]) + 1e-9)
+    exact = np.where(shade, np.hypot(*(corner - S)) + np.hypot(*(V[:, :2] - corner).T),
+                     np.hypot(*(V[:, :2] - S).T))
+    assert shade.sum() >= 3
+    assert np.abs(point_attr(obj.data, 'geodesic_distance') - exact).max() < 1e-5       # float32 storage
+    from conformal_flatten.addon.ops_geodesic import GEODESIC_ROWS
+    assert dict(GEODESIC_ROWS)["Grid"](rep) == "none: flat, exact"

@@ -55,6 +55,10 @@ def run(args):
             paths = (f"surface paths on {report['paths_islands']} of {report['islands_reached']} islands "
                      f"({report['steiner_points']} points per edge)")
             how = f"{how}, {paths}" if how else paths
+        if report['planar_islands']:
+            flat = (f"exact in the plane on {report['planar_islands']} of {report['islands_reached']} "
+                    "islands (flat)")
+            how = f"{how}, {flat}" if how else flat
         est, sec = 100 * report['error_estimate'], report['seconds']['total']
         print(f"geodesic: {len(dist)} vertices, max {fin.max():.6g}, {how}, "
               f"estimated mean error {est:.2g}%, {sec:.2f} s")

@@ -56,6 +56,7 @@ import numpy as np
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
+from .planar import plane_coordinates, planar_paths
 from .paths import (PATH_BUDGET, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, path_points, thin_warning,
                     steiner_distances, surface_paths)
 
@@ -1102,6 +1103,27 @@ class PathsChart:
         return self
 
 
+class PlanarChart:
+    """A flat part of the mesh (``plane_coordinates``) answered exactly by shortest paths in its plane
+    (``core.geodesic.planar``), with no grid: ``verts`` (k,) split vertices, ``V`` (k,3), ``F`` (mi,3)
+    local triangles, ``faces`` (mi,) input triangles, ``P`` (k,2) its plane coordinates, ``paths`` its
+    ``PlanarPaths`` (which builds the corners' visibility at the first query and keeps it)."""
+
+    def __init__(self, V, F, verts, faces, P, paths):
+        self.V, self.F, self.verts, self.faces, self.P = V, F, verts, faces, P
+        self.size, self.limit, self.nodes, self.metric_passes, self.paths_k = 0, None, 0.0, 0, None
+        self.paths = paths
+
+    def rasterise(self, mu_mode):
+        return self
+
+    def distances(self, loc, src_faces, bary):
+        """Distances (k,) from the local source vertices ``loc`` (a,) and the points in local faces
+        ``src_faces`` (b,) with barycentric coordinates ``bary`` (b,3)."""
+        pts = np.concatenate([self.P[loc], np.einsum('kc,kcd->kd', bary, self.P[self.F[src_faces]])])
+        return self.paths.distances(pts, np.r_[loc, np.full(len(src_faces), -1)])
+
+
 def _budget_k(ch, k_max=PATH_K[0]):
     """The most Steiner points per edge up to ``k_max`` (odd) whose graphs fit ``PATH_BUDGET`` on the
     chart ``ch`` (at least ``PATH_K[-1]``); its edge count is counted once and kept with its graphs."""
@@ -1448,6 +1470,16 @@ class GeodesicSolver:
                 self.local_of_split[verts] = np.arange(len(verts))
                 self.charts.append(ch)
                 continue
+            P = plane_coordinates(Vs[verts], Fl) if method == 'auto' and grid is None and \
+                self.steiner_points is None else None
+            flat = planar_paths(P, Fl) if P is not None else None
+            if flat is not None:                # a flat island: exact, no grid (``PlanarChart``)
+                if report['boundary'] == 'given':
+                    face_mu(Vs[verts], Fl, uvs[verts])          # a given map is checked all the same
+                self.chart_of_split[verts] = c
+                self.local_of_split[verts] = np.arange(len(verts))
+                self.charts.append(PlanarChart(Vs[verts], Fl, verts, faces, P, flat))
+                continue
             try:
                 ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, self.error_target, mu_mode)
             except ConformalError as exc:
@@ -1457,7 +1489,7 @@ class GeodesicSolver:
             self.local_of_split[verts] = np.arange(len(verts))
             self.charts.append(ch)
         for ch in self.charts:
-            if isinstance(ch, PathsChart):
+            if isinstance(ch, (PathsChart, PlanarChart)):
                 continue
             ch.paths_k = paths_choice(ch, method, grid, mu_mode)
             if ch.paths_k:                      # a token grid: the island is answered by paths
@@ -1467,7 +1499,7 @@ class GeodesicSolver:
             if total > NODE_BUDGET:
                 k = np.sqrt(NODE_BUDGET / total)
                 for ch in self.charts:
-                    if not ch.paths_k:
+                    if isinstance(ch, Chart) and not ch.paths_k:
                         ch.size = int(max(GRID_MIN, 64 * np.floor(ch.size * k / 64)))
                         ch.limit = ch.limit or 'budget'
         for ch in self.charts:
@@ -1547,7 +1579,8 @@ class GeodesicSolver:
         error_estimate (mean relative, dimensionless), error_target, clamped {below_euclid,
         above_edges} (vertex counts), filled_from_edges (vertices no grid node reached, given edge
         paths from their neighbours), paths_islands (islands answered by surface paths), paths_fallback
-        (of those, grid islands where a source lay too coarse to seed: warned), warnings (list of str),
+        (of those, grid islands where a source lay too coarse to seed: warned), planar_islands (flat
+        islands answered exactly in their plane: ``PlanarChart``), warnings (list of str),
         seconds {rasterise, solve, sample, total} and, for the set-up, flatten. Raises
         ``ConformalError``."""
         say = progress or (lambda f, msg: None)
@@ -1573,7 +1606,7 @@ class GeodesicSolver:
         dist_s = np.full(N, np.inf)
         marches, radii, reached = 0, [], 0
         hybrid, refined = 0, 0
-        path_est, path_k, unseeded, thin = {}, [], [], []
+        path_est, path_k, unseeded, thin, planar = {}, [], [], [], []
         active = np.unique(np.r_[self.chart_of_split[src_split], self.face_island[pf]]).astype(np.int64)
         for k, c in enumerate(active):
             say(0.05 + 0.85 * k / len(active), 'marching')
@@ -1585,6 +1618,11 @@ class GeodesicSolver:
             # vertices that another source is nearer to)
             sel = self.vert_of[src_split[self.chart_of_split[src_split] == c]]
             own = np.r_[by_vertex[np.searchsorted(s[by_vertex], sel)], len(s) + np.flatnonzero(mine)]
+            if isinstance(ch, PlanarChart):             # a flat island: exact
+                dist_s[ch.verts] = ch.distances(loc, src_faces, pb[mine])
+                planar.append(c)
+                reached += 1
+                continue
             d = None
             coarse = not ch.paths_k and ch.free is not None and \
                 (ch.free[loc].any() or ch.unresolved[src_faces].any())
@@ -1637,7 +1675,10 @@ class GeodesicSolver:
             fin = np.isfinite(dist_s)
             low = fin & (dist_s < E)
             high = fin & (dist_s > upper)
-            clamped = {'below_euclid': int(low.sum()), 'above_edges': int(high.sum())}
+            # counted where the bound moves a value by more than round-off (an exact planar island's
+            # values meet the Euclidean bound to the last bits where the source is in plain view)
+            clamped = {'below_euclid': int((low & (dist_s < E * (1 - 1e-12))).sum()),
+                       'above_edges': int((high & (dist_s > upper * (1 + 1e-12))).sum())}
             dist_s = np.where(low, E, dist_s)
             dist_s = np.where(high, upper, dist_s)
         dist = np.full(self.n, np.inf)
@@ -1652,6 +1693,9 @@ class GeodesicSolver:
             ch = self.charts[c]
             if c in path_est:
                 ests.append(path_est[c])
+                continue
+            if c in planar:                             # exact up to round-off
+                ests.append(0.0)
                 continue
             dc = dist_s[ch.verts]
             dc = dc[np.isfinite(dc) & (dc > 0)]
@@ -1689,7 +1733,7 @@ class GeodesicSolver:
             'on_mesh': hybrid, 'refined_sources': refined, 'marches': marches,
             'metric_passes': max([self.charts[c].metric_passes for c in active if c not in path_est],
                                  default=0),
-            'paths_islands': len(path_est), 'paths_fallback': len(unseeded),
+            'paths_islands': len(path_est), 'paths_fallback': len(unseeded), 'planar_islands': len(planar),
             'steiner_points': max(path_k) if path_k else None,
             'islands': len(self.charts), 'islands_reached': reached,
             'error_estimate': est, 'clamped': clamped, 'filled_from_edges': filled, 'warnings': warnings,
