@@ -191,3 +191,40 @@ def test_planar_paths_declines_two_fans_at_a_vertex_and_too_many_pairs():
     P = plane_coordinates(W, G)
     assert len(planar_paths(P, G).R) == 4
     assert planar_paths(P, G, budget=4 * len(W) - 1) is None
+
+
+def cells_mesh(cells, triangles=()):
+    """Triangles of axis-aligned cells ``(x0, x1, y0, y1)`` (two each) and of extra ``triangles`` (three
+    (x, y) corners each, counter-clockwise), vertices merged by position."""
+    pts, F = {}, []
+    for x0, x1, y0, y1 in cells:
+        q = [pts.setdefault(p, len(pts)) for p in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))]
+        F += [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]
+    for tri in triangles:
+        F.append([pts.setdefault(tuple(p), len(pts)) for p in tri])
+    V = np.array([[x, y, 0.0] for x, y in pts], float)
+    return V, np.array(F)
+
+
+def test_a_long_wall_near_the_source_blocks_what_lies_behind_it():
+    """A U whose arms are split by a slot, each inner wall one edge 4 long: the source 0.02 from the
+    middle of the left one, a vertex 0.27 away behind both walls, nearer than any end of them."""
+    xs = [0, 0.95, 1.0, 1.2, 1.25, 2.2]
+    cells = [(a, b, 0.0, 1.0) for a, b in zip(xs[:-1], xs[1:])]                    # the bottom
+    cells += [(0.0, 0.95, 1.0, 5.0), (0.95, 1.0, 1.0, 5.0)]                        # the left arm
+    cells += [(1.25, 2.2, 1.0, 3.0), (1.25, 2.2, 3.0, 5.0)]                        # the right arm
+    strip = [((1.2, 1.0), (1.25, 1.0), (1.25, 3.0)), ((1.2, 1.0), (1.25, 3.0), (1.2, 5.0)),
+             ((1.25, 3.0), (1.25, 5.0), (1.2, 5.0))]                               # its wall: one edge
+    V, F = cells_mesh(cells, strip)
+    gs = geo.GeodesicSolver(V, F)
+    for f in np.flatnonzero(np.all(np.isin(V[F][:, :, 0], [0.95, 1.0]), axis=1)):
+        W = V[F[f], :2]
+        bary = np.linalg.solve(np.r_[W.T, np.ones((1, 3))], [0.98, 3.0, 1.0])
+        if (bary >= 0).all():
+            break
+    X = bary @ W
+    d, rep = gs.distance(points=([f], bary[None]))
+    assert rep['planar_islands'] == 1
+    t = int(np.argmin(np.hypot(V[:, 0] - 1.25, V[:, 1] - 3.0)))
+    behind = np.hypot(*(X - [1.0, 1.0])) + 0.2 + np.hypot(0.05, 2.0)  # round the slot's bottom corners
+    assert abs(d[t] - behind) < 1e-12 and np.hypot(*(V[t, :2] - X)) < 0.3

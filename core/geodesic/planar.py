@@ -99,7 +99,6 @@ class PlanarPaths:
 
     def __init__(self, P, F):
         self.P = P = np.asarray(P, np.float64)
-        self.F = F
         self.n = n = len(P)
         self.seen = self.graph = None
         he = np.c_[F.ravel(), F[:, [1, 2, 0]].ravel()]
@@ -157,15 +156,16 @@ class PlanarPaths:
         ok[k] &= self._in_wedge(k, -d[k])
         # boundary edges that do not touch o: each against the targets within the angle it subtends
         A, B = P[self.E[:, 0]] - o, P[self.E[:, 1]] - o
-        ra, rb = np.hypot(A[:, 0], A[:, 1]), np.hypot(B[:, 0], B[:, 1])
-        far = np.minimum(ra, rb) > tol
-        A, B, ra, rb = A[far], B[far], ra[far], rb[far]
+        e = B - A
+        s = np.clip(-(A * e).sum(1) / np.maximum((e * e).sum(1), 1e-300), 0.0, 1.0)
+        near = np.hypot(A[:, 0] + s * e[:, 0], A[:, 1] + s * e[:, 1])     # o to the edge's nearest point
+        far = near > tol
+        A, B, near = A[far], B[far], near[far]
         ta, tb = np.arctan2(A[:, 1], A[:, 0]), np.arctan2(B[:, 1], B[:, 0])
         turn = np.mod(tb - ta + np.pi, 2 * np.pi) - np.pi
-        e_i, s_i = _expand(*_ranges(sa, np.where(turn > 0, ta, tb), np.abs(turn),
-                                    ANGLE_TOL + tol / np.minimum(ra, rb)))
+        e_i, s_i = _expand(*_ranges(sa, np.where(turn > 0, ta, tb), np.abs(turn), ANGLE_TOL + tol / near))
         t_i = order[s_i]
-        keep = ok[t_i] & (r[t_i] > np.minimum(ra, rb)[e_i] - tol)
+        keep = ok[t_i] & (r[t_i] > near[e_i] - tol)
         e_i, t_i = e_i[keep], t_i[keep]
         if len(e_i):
             dd, L, a, b = d[t_i], r[t_i], A[e_i], B[e_i]
