@@ -30,20 +30,19 @@ def _cross(ax, ay, bx, by):
 
 
 def plane_coordinates(V, F):
-    """2D coordinates (k,2) of a flat part ``V`` (k,3), ``F`` (m,3) in its own plane, turned so that
-    every triangle is counter-clockwise; None if the part is not flat (a vertex further than
-    ``PLANE_TOL`` times the bounding-box diagonal from the best plane) or its triangles do not all
-    turn the same way in that plane (folded)."""
+    """2D coordinates (k,2) of a flat part ``V`` (k,3) (every vertex in a triangle of ``F`` (m,3)) in
+    its own plane, turned so that every triangle is counter-clockwise; None if the part is not flat (a
+    vertex further than ``PLANE_TOL`` times the bounding-box diagonal from the best plane) or its
+    triangles do not all turn the same way in that plane (folded)."""
     V = np.asarray(V, np.float64)
-    used = np.unique(F)
-    diag = float(np.linalg.norm(np.ptp(V[used], axis=0)))
+    diag = float(np.linalg.norm(np.ptp(V, axis=0))) if len(V) else 0.0
     if len(F) == 0 or diag == 0.0:
         return None
-    c = V[used].mean(0)
-    _, _, Wt = np.linalg.svd(V[used] - c, full_matrices=False)
-    if float(np.abs((V[used] - c) @ Wt[2]).max()) > PLANE_TOL * diag:
+    X = V - V.mean(0)
+    _, U = np.linalg.eigh(X.T @ X)                  # the plane's normal: the least-spread direction
+    if float(np.abs(X @ U[:, 0]).max()) > PLANE_TOL * diag:
         return None
-    P = (V - c) @ Wt[:2].T
+    P = X @ U[:, 1:]
     e1, e2 = P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]]
     area = _cross(e1[:, 0], e1[:, 1], e2[:, 0], e2[:, 1])
     if (area > 0).all():
