@@ -14,7 +14,8 @@ Set-up (``GeodesicSolver``):
    several parts, or ``seams`` (cuts), go through ``core.atlas.islands.unwrap`` (one flattening per
    island, unpacked, true scale). A given ``uv`` is split into its connected parts. Distances are
    measured on the cut surface: infinite between islands.
-2. Per chart, which answers: the grid, or shortest surface paths through Steiner points
+2. Per chart, which answers: a flat island, shortest paths in its plane (``core.geodesic.planar``,
+   ``PlanarChart``: exact, no grid); else the grid, or shortest surface paths through Steiner points
    (``core.geodesic.paths.surface_paths``) where they cost at most about half the grid's query time
    at the grid size its error target asks for (``paths_choice``: small, coarse islands whose map
    varies a lot). The rest of this list is the grid's.
@@ -1614,15 +1615,15 @@ class GeodesicSolver:
             loc = self.local_of_split[src_split[self.chart_of_split[src_split] == c]]
             mine = self.face_island[pf] == c
             src_faces = np.searchsorted(ch.faces, pf[mine]) if mine.any() else np.zeros(0, np.int64)
-            # rows of X_src of this chart's sources, in S_uv's order (a refined seed must not claim
-            # vertices that another source is nearer to)
-            sel = self.vert_of[src_split[self.chart_of_split[src_split] == c]]
-            own = np.r_[by_vertex[np.searchsorted(s[by_vertex], sel)], len(s) + np.flatnonzero(mine)]
             if isinstance(ch, PlanarChart):             # a flat island: exact
                 dist_s[ch.verts] = ch.distances(loc, src_faces, pb[mine])
                 planar.append(c)
                 reached += 1
                 continue
+            # rows of X_src of this chart's sources, in S_uv's order (a refined seed must not claim
+            # vertices that another source is nearer to)
+            sel = self.vert_of[src_split[self.chart_of_split[src_split] == c]]
+            own = np.r_[by_vertex[np.searchsorted(s[by_vertex], sel)], len(s) + np.flatnonzero(mine)]
             d = None
             coarse = not ch.paths_k and ch.free is not None and \
                 (ch.free[loc].any() or ch.unresolved[src_faces].any())
