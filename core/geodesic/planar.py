@@ -5,7 +5,7 @@ reflex corners of the boundary (interior angle above pi). The distance from the 
 ``x`` is therefore the smaller of ``|x - s|``, over the sources ``s`` that ``x`` sees, and
 ``D(r) + |x - r|``, over the reflex corners ``r`` that ``x`` sees, where ``D`` is the distance of the
 corners: Dijkstra on the graph of the corners that see each other, started from the corners the
-sources see. Exact up to round-off (docs/geodesic.md, "Planar parts").
+sources see. Exact up to round-off (docs/geodesic.md, "Flat parts").
 
 Visibility is decided exactly on the triangulated domain (holes and seams are boundary too): the open
 segment ``p q`` may properly cross no boundary edge, and at every boundary vertex it touches (its ends
