@@ -18,6 +18,7 @@ Lengths are in the units of the 2D coordinates ``P`` (the mesh's own, for a flat
 import numpy as np
 
 from ..mesh.geometry import corner_angles
+from ..mesh.topology import halfedges, twin_halfedges
 
 PLANE_TOL = 1e-9     # flat: every vertex within this times the bounding-box diagonal of one plane
 GRAZE_TOL = 1e-10    # lengths below this times the part's extent count as zero in the visibility tests
@@ -100,10 +101,7 @@ class PlanarPaths:
         self.P = P = np.asarray(P, np.float64)
         self.n = n = len(P)
         self.seen = self.graph = None
-        he = np.c_[F.ravel(), F[:, [1, 2, 0]].ravel()]
-        key = np.minimum(he[:, 0], he[:, 1]) * n + np.maximum(he[:, 0], he[:, 1])
-        _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
-        self.E = E = he[cnt[inv] == 1]                      # boundary half-edges, the domain on the left
+        self.E = E = halfedges(F)[twin_halfedges(F, n) < 0]  # boundary half-edges, the domain on the left
         self.R = np.zeros(0, np.int64)
         if len(np.unique(E[:, 0])) != len(E):               # a vertex where two boundary fans meet
             self.E = None
