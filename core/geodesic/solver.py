@@ -1107,13 +1107,12 @@ class PathsChart:
 class PlanarChart:
     """A flat part of the mesh (``plane_coordinates``) answered exactly by shortest paths in its plane
     (``core.geodesic.planar``), with no grid: ``verts`` (k,) split vertices, ``V`` (k,3), ``F`` (mi,3)
-    local triangles, ``faces`` (mi,) input triangles, ``P`` (k,2) its plane coordinates, ``paths`` its
-    ``PlanarPaths`` (which builds the corners' visibility at the first query and keeps it)."""
+    local triangles, ``faces`` (mi,) input triangles, ``paths`` its ``PlanarPaths`` (the plane
+    coordinates ``paths.P`` (k,2); it builds the corners' visibility at the first query and keeps it)."""
 
-    def __init__(self, V, F, verts, faces, P, paths):
-        self.V, self.F, self.verts, self.faces, self.P = V, F, verts, faces, P
+    def __init__(self, V, F, verts, faces, paths):
+        self.V, self.F, self.verts, self.faces, self.paths = V, F, verts, faces, paths
         self.size, self.limit, self.nodes, self.metric_passes, self.paths_k = 0, None, 0.0, 0, None
-        self.paths = paths
 
     def rasterise(self, mu_mode):
         return self
@@ -1121,7 +1120,8 @@ class PlanarChart:
     def distances(self, loc, src_faces, bary):
         """Distances (k,) from the local source vertices ``loc`` (a,) and the points in local faces
         ``src_faces`` (b,) with barycentric coordinates ``bary`` (b,3)."""
-        pts = np.concatenate([self.P[loc], np.einsum('kc,kcd->kd', bary, self.P[self.F[src_faces]])])
+        P = self.paths.P
+        pts = np.concatenate([P[loc], np.einsum('kc,kcd->kd', bary, P[self.F[src_faces]])])
         return self.paths.distances(pts, np.r_[loc, np.full(len(src_faces), -1)])
 
 
@@ -1467,25 +1467,20 @@ class GeodesicSolver:
                         f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles) is closed and too large "
                         "for surface paths: mark seams that cut it open, or use sphere mode",
                         'no_boundary', 'mark_seams')
-                self.chart_of_split[verts] = c
-                self.local_of_split[verts] = np.arange(len(verts))
-                self.charts.append(ch)
-                continue
-            P = plane_coordinates(Vs[verts], Fl) if method == 'auto' and grid is None and \
-                self.steiner_points is None else None
-            flat = planar_paths(P, Fl) if P is not None else None
-            if flat is not None:                # a flat island: exact, no grid (``PlanarChart``)
-                if report['boundary'] == 'given':
-                    face_mu(Vs[verts], Fl, uvs[verts])          # a given map is checked all the same
-                self.chart_of_split[verts] = c
-                self.local_of_split[verts] = np.arange(len(verts))
-                self.charts.append(PlanarChart(Vs[verts], Fl, verts, faces, P, flat))
-                continue
-            try:
-                ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, self.error_target, mu_mode)
-            except ConformalError as exc:
-                raise (exc.with_context(f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles)")
-                       if len(cuts) else exc) from None
+            else:
+                P = plane_coordinates(Vs[verts], Fl) if method == 'auto' and grid is None and \
+                    self.steiner_points is None else None
+                flat = planar_paths(P, Fl) if P is not None else None
+                if flat is not None:            # a flat island: exact, no grid (``PlanarChart``)
+                    if report['boundary'] == 'given':
+                        face_mu(Vs[verts], Fl, uvs[verts])      # a given map is checked all the same
+                    ch = PlanarChart(Vs[verts], Fl, verts, faces, flat)
+                else:
+                    try:
+                        ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, self.error_target, mu_mode)
+                    except ConformalError as exc:
+                        raise (exc.with_context(f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles)")
+                               if len(cuts) else exc) from None
             self.chart_of_split[verts] = c
             self.local_of_split[verts] = np.arange(len(verts))
             self.charts.append(ch)
