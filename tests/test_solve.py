@@ -82,6 +82,30 @@ def test_solves_match_residual_and_each_other(method):
     assert np.abs(X - ref).max() < 1e-9 * np.abs(ref).max()
 
 
+def test_cholmod_block_solve_matches_cvxopt_per_column(monkeypatch):
+    """CHOLMOD's multi-column solve through ctypes (core.mesh.cholmod_block) is what runs on Linux
+    (cvxopt's wheel exports CHOLMOD there), and it gives cvxopt's own per-column answers, across
+    several blocks and with a block narrower than the right-hand sides."""
+    from core.mesh.cholmod_block import BlockSolver
+    block = BlockSolver.load()
+    assert block is not None
+    K = _interior_laplacian('ridge', 41)
+    rng = np.random.default_rng(1)
+    B = rng.standard_normal((K.shape[0], 13))
+    f = solve.Factor(K, method='cholmod')
+    monkeypatch.setattr(solve, 'CHOLMOD_BLOCK_BYTES', 8 * K.shape[0] * 5)     # blocks of 5, 5, 3
+    X = f.solve(B)
+    x1 = f.solve(B[:, 7])
+    monkeypatch.setattr(BlockSolver, 'load', classmethod(lambda cls: None))   # cvxopt's own loop
+    ref, ref1 = f.solve(B), f.solve(B[:, 7])
+    assert X.shape == B.shape and x1.shape == (K.shape[0],)
+    tol = 1e-12 * np.abs(ref).max()
+    assert np.abs(X - ref).max() < tol and np.abs(x1 - ref1).max() < tol
+    assert np.abs(K @ X - B).max() < 1e-10 * np.abs(K).max() * np.abs(X).max()
+    with pytest.raises(ValueError):                         # a capsule that is not a real factor
+        block.solve(object(), B)
+
+
 def test_fortran_order_and_integer_rhs():
     K = _interior_laplacian()
     f = solve.Factor(K)

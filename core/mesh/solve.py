@@ -31,6 +31,7 @@ import scipy.sparse.linalg as spla
 
 from ..background import Background
 from ..errors import ConformalError
+from .cholmod_block import BlockSolver
 
 try:                                     # the optional compiled Cholesky (a pinned requirement)
     from cvxopt import cholmod as _cholmod
@@ -72,7 +73,8 @@ BACKENDS = ('cholmod', 'superlu')
 SPLIT_RHS = 8           # SuperLU: split at least this many right-hand sides over WORKERS threads
 BLOCK_BYTES = 16 << 20  # SuperLU: right-hand sides are solved in column blocks of at most this size
 CHOLMOD_MIN = 1_000     # rows from which CHOLMOD is used (below, its fixed cost of ~0.5 ms dominates)
-CHOLMOD_BLOCK = 4       # CHOLMOD solves this many right-hand sides per call (the GIL is free between)
+CHOLMOD_BLOCK = 4       # cvxopt's solve: this many right-hand sides per call (the GIL is free between)
+CHOLMOD_BLOCK_BYTES = 64 << 20  # cholmod_block: right-hand sides per CHOLMOD call, at most this size
 PARALLEL_MAX = 400_000  # total rows up to which factor_all runs SuperLU factorisations at once (memory)
 PARALLEL_MIN = 4_000    # total rows from which that pays (below, the threads cost more than they save)
 ND_MIN = 60_000         # rows from which fill_order computes a nested dissection order
@@ -290,15 +292,26 @@ class Factor:
                                  "triangles or a disconnected piece", 'degenerate') from None
 
     def _solve_cholmod(self, b):
-        """CHOLMOD's solve of (k,) or (k,r) ``b``; (k,r) comes back Fortran-ordered. cvxopt's dense
-        matrices are column-major and its solve holds the GIL for the whole call: columns go in blocks
-        of ``CHOLMOD_BLOCK``, so other threads (numpy work beside a long multi-column solve, Blender's
-        interface) get the GIL between blocks."""
+        """CHOLMOD's solve of (k,) or (k,r) ``b``; (k,r) comes back Fortran-ordered.
+
+        Where ``cholmod_block`` loads, columns go to CHOLMOD in blocks of at most
+        ``CHOLMOD_BLOCK_BYTES`` (one pass over the factor per block, the GIL free during each). Else
+        through cvxopt, whose solve takes one column per pass and holds the GIL for the whole call:
+        blocks of ``CHOLMOD_BLOCK`` columns, so other threads (numpy work beside a long multi-column
+        solve, Blender's interface) get the GIL between them."""
+        block = BlockSolver.load()
         if b.ndim == 1:
+            if block is not None:
+                return block.solve(self._chol, b[:, None])[:, 0]
             B = _cvx_matrix(np.ascontiguousarray(b))
             _cholmod.solve(self._chol, B)
             return np.asarray(B)[:, 0]
         x = np.empty(b.shape, order='F')
+        if block is not None:
+            w = max(1, CHOLMOD_BLOCK_BYTES // (8 * b.shape[0]))
+            for c0 in range(0, b.shape[1], w):
+                x[:, c0:c0 + w] = block.solve(self._chol, b[:, c0:c0 + w])
+            return x
         for c0 in range(0, b.shape[1], CHOLMOD_BLOCK):
             B = _cvx_matrix(np.asfortranarray(b[:, c0:c0 + CHOLMOD_BLOCK]))
             _cholmod.solve(self._chol, B)

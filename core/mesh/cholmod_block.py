@@ -1,0 +1,111 @@
+"""Many right-hand sides in one CHOLMOD solve, for factors made by cvxopt's ``cholmod`` module.
+
+cvxopt's ``cholmod.solve`` passes its dense right-hand sides to CHOLMOD one column at a time, so a
+solve of r columns reads the whole factor 2r times; on big meshes that pass is memory-bound (0.07 s
+per column for the 1M bump's ``L_II``, whose factor has 34M entries). CHOLMOD's own ``cholmod_solve``
+takes a block of columns and runs the supernodal triangular solves as dense matrix-matrix products,
+reading the factor twice per block (docs/scale.md, "Eighteenth round"). cvxopt's extension module
+carries CHOLMOD and, on Linux and macOS, exports its symbols, so ``ctypes`` reaches
+``cholmod_l_solve`` with the very factor cvxopt computed.
+
+``BlockSolver.load()`` returns a solver, or None where the symbols are not exported (Windows) or a
+check on a small system fails; the caller then keeps cvxopt's per-column solve. ctypes releases the
+GIL for the call, so other threads run while a block is solved; each call has its own
+``cholmod_common`` (cheap to start), so two threads may solve at once.
+"""
+import ctypes
+import threading
+
+import numpy as np
+
+CHOLMOD_A = 0           # cholmod_solve's system: A x = b (the factor's permutation included)
+CHOLMOD_REAL = 1        # xtype of a real dense matrix
+COMMON_BYTES = 1 << 16  # room for cholmod_common (about 2.3 kB in CHOLMOD 3; its size is not exported)
+CAPSULE = b'CHOLMOD FACTOR D L'      # cvxopt's name for the factor of a real matrix
+
+
+class _Dense(ctypes.Structure):
+    """CHOLMOD's ``cholmod_dense`` (column-major values at ``x``; unchanged since CHOLMOD 1)."""
+    _fields_ = [('nrow', ctypes.c_size_t), ('ncol', ctypes.c_size_t), ('nzmax', ctypes.c_size_t),
+                ('d', ctypes.c_size_t), ('x', ctypes.c_void_p), ('z', ctypes.c_void_p),
+                ('xtype', ctypes.c_int), ('dtype', ctypes.c_int)]
+
+
+class BlockSolver:
+    """``solve(factor, b)``: ``A^-1 b`` for cvxopt's CHOLMOD factor ``factor`` of a real (k,k)
+    matrix ``A`` and ``b`` (k,r) float64; returns (k,r) Fortran-ordered float64."""
+
+    _loaded = None
+    _lock = threading.Lock()
+
+    def __init__(self, lib):
+        self._lib = lib
+        # own prototypes of the two C-API calls (ctypes.pythonapi's shared ones are left as they are)
+        self._capsule_name = ctypes.PYFUNCTYPE(ctypes.c_char_p, ctypes.py_object)(
+            ('PyCapsule_GetName', ctypes.pythonapi))
+        self._capsule_pointer = ctypes.PYFUNCTYPE(ctypes.c_void_p, ctypes.py_object, ctypes.c_char_p)(
+            ('PyCapsule_GetPointer', ctypes.pythonapi))
+        lib.cholmod_l_start.argtypes = [ctypes.c_void_p]
+        lib.cholmod_l_finish.argtypes = [ctypes.c_void_p]
+        lib.cholmod_l_solve.restype = ctypes.POINTER(_Dense)
+        lib.cholmod_l_solve.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.POINTER(_Dense),
+                                        ctypes.c_void_p]
+        lib.cholmod_l_free_dense.argtypes = [ctypes.POINTER(ctypes.POINTER(_Dense)), ctypes.c_void_p]
+
+    @classmethod
+    def load(cls):
+        """The solver for the installed cvxopt, or None if it cannot be used here (checked once per
+        process: symbols present, and a 3x3 system solved the same as cvxopt's own solve)."""
+        with cls._lock:
+            if cls._loaded is None:
+                cls._loaded = cls._try_load() or False
+            return cls._loaded or None
+
+    @classmethod
+    def _try_load(cls):
+        try:
+            from cvxopt import cholmod, matrix, spmatrix
+            lib = ctypes.CDLL(cholmod.__file__)
+            version = (ctypes.c_int * 3)()
+            lib.cholmod_l_version(version)
+            if version[0] < 2:
+                return None
+            solver = cls(lib)
+            A = spmatrix([4.0, 1.0, 3.0, 1.0, 5.0], [0, 1, 1, 2, 2], [0, 0, 1, 1, 2], (3, 3))
+            fac = cholmod.symbolic(A)
+            cholmod.numeric(A, fac)
+            b = np.array([[1.0, 0.5], [2.0, -1.0], [3.0, 0.25]], order='F')
+            want = matrix(b)
+            cholmod.solve(fac, want)
+            got = solver.solve(fac, b)
+            if not np.allclose(got, np.asarray(want), rtol=1e-12, atol=0):
+                return None
+            return solver
+        except (ImportError, OSError, AttributeError, ValueError, TypeError):
+            return None
+
+    def solve(self, factor, b):
+        name = self._capsule_name(factor)
+        if name != CAPSULE:
+            raise ValueError(f"not cvxopt's factor of a real matrix: {name!r}")
+        L = self._capsule_pointer(factor, name)
+        b = np.asfortranarray(b, dtype=np.float64)
+        k, r = b.shape
+        B = _Dense(k, r, k * r, k, b.ctypes.data, None, CHOLMOD_REAL, 0)
+        common = ctypes.create_string_buffer(COMMON_BYTES)
+        self._lib.cholmod_l_start(common)
+        try:
+            X = self._lib.cholmod_l_solve(CHOLMOD_A, L, ctypes.byref(B), common)
+            if not X:
+                raise ArithmeticError("CHOLMOD's solve failed")
+            try:
+                x = X.contents
+                if (x.nrow, x.ncol, x.d) != (k, r, k):
+                    raise ArithmeticError("CHOLMOD's solve returned a matrix of another shape")
+                out = np.ctypeslib.as_array(ctypes.cast(x.x, ctypes.POINTER(ctypes.c_double)),
+                                            shape=(r, k)).T.copy(order='F')
+            finally:
+                self._lib.cholmod_l_free_dense(ctypes.byref(X), common)
+        finally:
+            self._lib.cholmod_l_finish(common)
+        return out
