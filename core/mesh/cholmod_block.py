@@ -4,16 +4,20 @@ cvxopt's ``cholmod.solve`` passes its dense right-hand sides to CHOLMOD one colu
 solve of r columns reads the whole factor 2r times; on big meshes that pass is memory-bound (0.07 s
 per column for the 1M bump's ``L_II``, whose factor has 34M entries). CHOLMOD's own ``cholmod_solve``
 takes a block of columns and runs the supernodal triangular solves as dense matrix-matrix products,
-reading the factor twice per block (docs/scale.md, "Eighteenth round"). cvxopt's extension module
-carries CHOLMOD and, on Linux and macOS, exports its symbols, so ``ctypes`` reaches
-``cholmod_l_solve`` with the very factor cvxopt computed.
+reading the factor twice per block (docs/scale.md, "Eighteenth round"). ``ctypes`` reaches
+``cholmod_l_solve`` of the CHOLMOD that cvxopt uses, with the very factor cvxopt computed. That
+CHOLMOD is linked into the extension and exported (the cp311 Linux wheel), or a library beside it (the
+cp313 Linux wheels, macOS).
 
-``BlockSolver.load()`` returns a solver, or None where the symbols are not exported (Windows) or a
-check on a small system fails; the caller then keeps cvxopt's per-column solve. ctypes releases the
+``BlockSolver.load()`` returns a solver, or None where CHOLMOD's symbols are not reachable (Windows:
+linked into the extension, not exported) or a check on a small system fails; the caller then keeps
+cvxopt's per-column solve. ctypes releases the
 GIL for the call, so other threads run while a block is solved; each call has its own
 ``cholmod_common`` (cheap to start), so two threads may solve at once.
 """
 import ctypes
+import glob
+import os
 import threading
 
 import numpy as np
@@ -29,6 +33,18 @@ class _Dense(ctypes.Structure):
     _fields_ = [('nrow', ctypes.c_size_t), ('ncol', ctypes.c_size_t), ('nzmax', ctypes.c_size_t),
                 ('d', ctypes.c_size_t), ('x', ctypes.c_void_p), ('z', ctypes.c_void_p),
                 ('xtype', ctypes.c_int), ('dtype', ctypes.c_int)]
+
+
+def _libraries(module):
+    """Files that may hold the CHOLMOD of cvxopt's ``cholmod`` extension ``module`` (its path): the
+    extension itself (the cp311 Linux wheel links CHOLMOD in and exports it), then the CHOLMOD library
+    bundled beside it (``cvxopt.libs`` in the cp313 Linux wheels, ``.dylibs`` on macOS)."""
+    here = os.path.dirname(module)
+    found = [module]
+    for pattern in (os.path.join(here, os.pardir, 'cvxopt.libs', 'libcholmod*'),
+                    os.path.join(here, '.dylibs', 'libcholmod*')):
+        found += sorted(glob.glob(pattern))
+    return found
 
 
 class BlockSolver:
@@ -65,24 +81,24 @@ class BlockSolver:
     def _try_load(cls):
         try:
             from cvxopt import cholmod, matrix, spmatrix
-            lib = ctypes.CDLL(cholmod.__file__)
-            version = (ctypes.c_int * 3)()
-            lib.cholmod_l_version(version)
-            if version[0] < 2:
-                return None
-            solver = cls(lib)
-            A = spmatrix([4.0, 1.0, 3.0, 1.0, 5.0], [0, 1, 1, 2, 2], [0, 0, 1, 1, 2], (3, 3))
-            fac = cholmod.symbolic(A)
-            cholmod.numeric(A, fac)
-            b = np.array([[1.0, 0.5], [2.0, -1.0], [3.0, 0.25]], order='F')
-            want = matrix(b)
-            cholmod.solve(fac, want)
-            got = solver.solve(fac, b)
-            if not np.allclose(got, np.asarray(want), rtol=1e-12, atol=0):
-                return None
-            return solver
-        except (ImportError, OSError, AttributeError, ValueError, TypeError):
+        except ImportError:
             return None
+        for path in _libraries(cholmod.__file__):
+            try:
+                lib = ctypes.CDLL(path)
+                lib.cholmod_l_solve            # noqa: B018  (AttributeError where it is not exported)
+                solver = cls(lib)
+                A = spmatrix([4.0, 1.0, 3.0, 1.0, 5.0], [0, 1, 1, 2, 2], [0, 0, 1, 1, 2], (3, 3))
+                fac = cholmod.symbolic(A)
+                cholmod.numeric(A, fac)
+                b = np.array([[1.0, 0.5], [2.0, -1.0], [3.0, 0.25]], order='F')
+                want = matrix(b)
+                cholmod.solve(fac, want)
+                if np.allclose(solver.solve(fac, b), np.asarray(want), rtol=1e-12, atol=0):
+                    return solver
+            except (OSError, AttributeError, ValueError, TypeError, ArithmeticError):
+                continue
+        return None
 
     def solve(self, factor, b):
         name = self._capsule_name(factor)
