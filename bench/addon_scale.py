@@ -92,15 +92,19 @@ def main():
     except OSError:
         load = ''
     print(f"add-on `uniform` (operator defaults), medians of {args.repeat}, {load}\n")
-    print("| triangles | operator s (median) | runs s | peak MB | mu_ratio | flips | vs smallest |")
-    print("|---|---|---|---|---|---|---|")
+    print("| triangles | operator s (median) | runs s | core total s (median) | peak MB | mu_ratio | flips "
+          "| vs smallest |")
+    print("|---|---|---|---|---|---|---|---|")
     base = None
     for s in args.sizes:
         rs = runs[s]
         med = statistics.median(r['seconds'] for r in rs)
         base = base or med
         each = ', '.join(f"{r['seconds']:.1f}" for r in rs)
-        print(f"| {rs[0]['triangles']:,} | {med:.1f} | {each} | "
+        core = [r.get('core_seconds') for r in rs]
+        core = [c.get('total') if isinstance(c, dict) else c for c in core]
+        core = f"{statistics.median(core):.1f}" if all(c is not None for c in core) else '-'
+        print(f"| {rs[0]['triangles']:,} | {med:.1f} | {each} | {core} | "
               f"{max(r['peak_mb'] for r in rs):.0f} | {rs[0]['mu_ratio']:.4f} | {rs[0]['flips']} | "
               f"{med / base:.2f}x |")
 
