@@ -31,6 +31,7 @@ import time
 
 import numpy as np
 
+from ..blas import one_thread
 from ..errors import ConformalError
 from ..disk.flatten import flatten
 from ..mesh import topology
@@ -176,6 +177,7 @@ def _disk(V, F, loops, boundary, fit, max_faces, progress, options):
     return res.uv, res.mu, rep
 
 
+@one_thread()
 def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'uniform', holes: str = 'auto',
            fit: str = 'unit_square', island_scale: str = 'true', pack: bool = True, margin: float = 0.01,
            on_error: str = 'raise', max_faces: int | None = DEFAULT_MAX_FACES, edges=None,

@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ..background import Background
+from ..background import beside
+from ..blas import one_thread
 from ..errors import ConformalError
 from ..mesh.geometry import angle_sums, face_areas
 from ..mesh.laplacian import cotan_laplacian
@@ -292,6 +293,7 @@ def _warnings(report, qc_limit=QC_WARN):
     return w
 
 
+@one_thread()
 def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FACES, bound=None,
             progress=None, real_faces=None, operators='auto', checked_loop=None, **options) -> FlattenResult:
     """Flatten a disk-topology triangle mesh conformally.
@@ -388,7 +390,7 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     u = None
     job = None
     if boundary == 'uniform' and (bound or (bound is None and len(F) <= AUTO_BOUND_FACES)):
-        job = Background(_bound, system, mask)     # it needs only the system: it runs beside optimise
+        job = beside(len(F), _bound, system, mask)     # it needs only the system: beside optimise
     t = time.perf_counter()
     if boundary == 'free':
         uv = lscm(V, system.L, system.B)
@@ -489,8 +491,9 @@ def certified_bound(V, F, operators, real_faces=None):
 def _bound(system, mask):
     """``vertex_bound(system, real_faces=mask)`` as (value or None, the ConformalError or None, seconds
     it took); any other exception propagates. The bound depends only on the system, not on the
-    optimiser's map, and most of its time is spent in HiGHS and in sparse solves: on two or more cores
-    it runs on its own thread beside ``optimise`` (``Background``; docs/scale.md, latency)."""
+    optimiser's map, and most of its time is spent in HiGHS and in sparse solves: from
+    ``THREAD_MIN_FACES`` triangles it runs on its own thread beside ``optimise`` (``beside``;
+    docs/scale.md, latency)."""
     t = time.perf_counter()
     try:
         value, error = vertex_bound(system, real_faces=mask), None

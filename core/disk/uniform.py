@@ -21,7 +21,7 @@ no flipped triangle and conformality inside the budget.
 import numpy as np
 import scipy.sparse as sp
 
-from ..background import Background
+from ..background import beside
 from ..errors import ConformalError
 from ..mesh.geometry import face_means
 from ..mesh.measures import singular_values
@@ -305,7 +305,7 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     spread0 = float(s0.max() - s0.min())
     flat = spread0 <= -np.log1p(-min_gain)
     progress(0.15, 'boundary response')
-    job = Background(system.harmonic, Phi) if H is None and not flat else None
+    job = beside(len(system.F), system.harmonic, Phi) if H is None and not flat else None
     budget = []
 
     def qc_budget():

@@ -30,6 +30,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..background import Background
+from ..blas import library_paths, set_threads
 from ..errors import ConformalError
 from .cholmod_block import BlockSolver
 
@@ -49,21 +50,7 @@ def _cvxopt_blas_threads(n=1):
     equals wall time), but OpenBLAS's threads spin while they wait: on a busy machine (Blender's own
     threads, other processes) a 32-column solve measured 2.8x slower with them than without
     (docs/scale.md)."""
-    import ctypes
-    import glob
-    import cvxopt
-    here = os.path.dirname(cvxopt.__file__)
-    for pattern in (os.path.join(here, os.pardir, 'cvxopt.libs', '*openblas*'),     # Linux wheels
-                    os.path.join(here, '.dylibs', '*openblas*'),                    # macOS
-                    os.path.join(here, '.libs', '*openblas*')):                      # Windows
-        for path in sorted(glob.glob(pattern)):
-            try:
-                lib = ctypes.CDLL(path)
-                lib.openblas_set_num_threads(int(n))
-                return int(lib.openblas_get_num_threads())
-            except (OSError, AttributeError):
-                continue
-    return None
+    return set_threads(library_paths('cvxopt'), n)
 
 
 BLAS_THREADS = _cvxopt_blas_threads() if _cholmod is not None else None
