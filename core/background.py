@@ -9,7 +9,29 @@ import threading
 THREAD_MIN_FACES = 4_000    # beside: work for a mesh of fewer triangles runs inline (docs/scale.md)
 
 
-class Background:
+def _outcome(fn, args, kwargs):
+    """(value, None) of ``fn(*args, **kwargs)``, or (None, the exception it raised)."""
+    try:
+        return fn(*args, **kwargs), None
+    except BaseException as exc:               # handed to the caller of result()
+        return None, exc
+
+
+class Done:
+    """Work run inline, at construction, with the interface of ``Background``: ``result()`` returns
+    its value or raises its exception."""
+
+    def __init__(self, fn, *args, **kwargs):
+        self._out = _outcome(fn, args, kwargs)
+
+    def result(self):
+        value, exc = self._out
+        if exc is not None:
+            raise exc
+        return value
+
+
+class Background(Done):
     """``fn(*args, **kwargs)`` on its own daemon thread. ``result()`` waits and returns its value, or
     raises the exception it raised; it may be called from several threads."""
 
@@ -19,34 +41,11 @@ class Background:
         self._thread.start()
 
     def _run(self, fn, args, kwargs):
-        try:
-            self._out = (fn(*args, **kwargs), None)
-        except BaseException as exc:           # handed to the caller of result()
-            self._out = (None, exc)
+        self._out = _outcome(fn, args, kwargs)
 
     def result(self):
         self._thread.join()
-        value, exc = self._out
-        if exc is not None:
-            raise exc
-        return value
-
-
-class Done:
-    """A ``Background`` whose work ran inline, at construction: ``result()`` returns its value or
-    raises its exception."""
-
-    def __init__(self, fn, *args, **kwargs):
-        try:
-            self._out = (fn(*args, **kwargs), None)
-        except BaseException as exc:           # handed to the caller of result()
-            self._out = (None, exc)
-
-    def result(self):
-        value, exc = self._out
-        if exc is not None:
-            raise exc
-        return value
+        return super().result()
 
 
 def beside(faces, fn, *args, **kwargs):

@@ -11,9 +11,9 @@ cp313 Linux wheels, macOS).
 
 ``BlockSolver.load()`` returns a solver, or None where CHOLMOD's symbols are not reachable (Windows:
 linked into the extension, not exported) or a check on a small system fails; the caller then keeps
-cvxopt's per-column solve. ctypes releases the
-GIL for the call, so other threads run while a block is solved; each call has its own
-``cholmod_common`` (cheap to start), so two threads may solve at once.
+cvxopt's per-column solve. ctypes releases the GIL for the call, so other threads run while a
+block is solved; each call has its own ``cholmod_common`` (cheap to start), so two threads may solve
+at once.
 """
 import ctypes
 import glob

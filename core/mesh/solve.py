@@ -3,9 +3,11 @@
 Two backends (docs/scale.md):
 
 - ``cholmod``: CHOLMOD's supernodal sparse Cholesky factorisation ``K = L L^T`` with an optimised
-  BLAS, through cvxopt's ``cholmod`` module, when its wheel is installed. Used from ``CHOLMOD_MIN``
-  rows: measured 1.7-2.7x faster than SuperLU from 8k to 100k triangles and 2.5-3x at 1M-2M
-  (docs/scale.md), in about half of SuperLU's factor memory (one triangle instead of L and U).
+  BLAS, through cvxopt's ``cholmod`` module, when its wheel is installed; solves with many
+  right-hand sides go to CHOLMOD in blocks of columns where ``cholmod_block`` reaches it. Used from
+  ``CHOLMOD_MIN`` rows: measured 1.7-2.7x faster than SuperLU from 8k to 100k triangles and 2.5-3x
+  at 1M-2M (docs/scale.md), in about half of SuperLU's factor memory (one triangle instead of L and
+  U).
 - ``superlu``: scipy's SuperLU in symmetric mode, always available. Used below ``CHOLMOD_MIN``,
   where cvxopt is missing, for a matrix that is not numerically symmetric, and for one that CHOLMOD
   finds not positive definite (a Laplacian of a mesh with very obtuse triangles can be indefinite
