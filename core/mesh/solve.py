@@ -59,7 +59,9 @@ BLAS_THREADS = _cvxopt_blas_threads() if _cholmod is not None else None
 
 WORKERS = min(2, os.cpu_count() or 1)
 BACKENDS = ('cholmod', 'superlu')
-SPLIT_RHS = 8           # SuperLU: split at least this many right-hand sides over WORKERS threads
+SPLIT_RHS = 8           # SuperLU: split at least this many right-hand sides over WORKERS threads ...
+SPLIT_MIN_ROWS = 1_000  # ... for a matrix of at least this many rows (below, a pool's 0.15 ms costs more
+                        # than the solve: 0.02-0.08 ms for 32 columns at 49-225 rows; even at 961)
 BLOCK_BYTES = 16 << 20  # SuperLU: right-hand sides are solved in column blocks of at most this size
 CHOLMOD_MIN = 1_000     # rows from which CHOLMOD is used (below, its fixed cost of ~0.5 ms dominates)
 CHOLMOD_BLOCK = 4       # cvxopt's solve: this many right-hand sides per call (the GIL is free between)
@@ -324,15 +326,17 @@ class Factor:
             else:
                 # columns in blocks of at most BLOCK_BYTES, each permuted, solved and put in its place
                 # on its own (the peak memory of many right-hand sides stays near the output's); SuperLU
-                # releases the GIL, so with SPLIT_RHS or more columns the blocks go to two threads
+                # releases the GIL, so with SPLIT_RHS or more columns of SPLIT_MIN_ROWS or more rows
+                # the blocks go to two threads
                 r = b.shape[1]
                 w = max(1, min(r, BLOCK_BYTES // (8 * max(1, b.shape[0]))))
-                if r >= SPLIT_RHS and WORKERS > 1:
+                split = r >= SPLIT_RHS and b.shape[0] >= SPLIT_MIN_ROWS and WORKERS > 1
+                if split:
                     w = min(w, -(-r // WORKERS))
 
                 def block(c0):
                     x[rows, c0:c0 + w] = self._lu.solve(b[rows, c0:c0 + w])
-                if r >= SPLIT_RHS and WORKERS > 1:
+                if split:
                     with ThreadPoolExecutor(WORKERS) as ex:
                         list(ex.map(block, range(0, r, w)))
                 else:
