@@ -18,10 +18,9 @@ libraries at ``paths`` (cvxopt's private copy is held at one thread for good, ``
 """
 import contextlib
 import ctypes
-import glob
-import importlib.util
-import os
 import threading
+
+from .native import bundled_libraries
 
 # the names of OpenBLAS's thread count functions in the builds the wheels bundle (plain, 64-bit
 # integer interface, scipy-openblas)
@@ -31,21 +30,8 @@ _PREFIXES = ('openblas_', 'scipy_openblas_')
 
 def library_paths(package):
     """Paths (list of str) of the OpenBLAS libraries bundled with the installed ``package`` (a
-    top-level name: 'numpy', 'scipy', 'cvxopt'): in ``<package>.libs`` beside it (Linux, Windows), in
-    its ``.dylibs`` (macOS) or ``.libs`` (older Windows wheels). Empty if none is found."""
-    try:
-        spec = importlib.util.find_spec(package)
-    except (ImportError, ValueError):
-        return []
-    if spec is None or not spec.submodule_search_locations:
-        return []
-    here = list(spec.submodule_search_locations)[0]
-    found = []
-    for pattern in (os.path.join(here, os.pardir, f'{package}.libs', '*openblas*'),
-                    os.path.join(here, '.dylibs', '*openblas*'),
-                    os.path.join(here, '.libs', '*openblas*')):
-        found += sorted(glob.glob(pattern))
-    return found
+    top-level name: 'numpy', 'scipy', 'cvxopt'; ``core.native``). Empty if none is found."""
+    return bundled_libraries(package, '*openblas*')
 
 
 def _functions(path):

@@ -16,11 +16,11 @@ block is solved; each call has its own ``cholmod_common`` (cheap to start), so t
 at once.
 """
 import ctypes
-import glob
-import os
 import threading
 
 import numpy as np
+
+from ..native import bundled_libraries
 
 CHOLMOD_A = 0           # cholmod_solve's system: A x = b (the factor's permutation included)
 CHOLMOD_REAL = 1        # xtype of a real dense matrix
@@ -38,18 +38,14 @@ class _Dense(ctypes.Structure):
 def _libraries(module):
     """Files that may hold the CHOLMOD of cvxopt's ``cholmod`` extension ``module`` (its path): the
     extension itself (the cp311 Linux wheel links CHOLMOD in and exports it), then the CHOLMOD library
-    bundled beside it (``cvxopt.libs`` in the cp313 Linux wheels, ``.dylibs`` on macOS)."""
-    here = os.path.dirname(module)
-    found = [module]
-    for pattern in (os.path.join(here, os.pardir, 'cvxopt.libs', 'libcholmod*'),
-                    os.path.join(here, '.dylibs', 'libcholmod*')):
-        found += sorted(glob.glob(pattern))
-    return found
+    cvxopt bundles (``cvxopt.libs`` in the cp313 Linux wheels, ``.dylibs`` on macOS; ``core.native``)."""
+    return [module] + bundled_libraries('cvxopt', 'libcholmod*')
 
 
 class BlockSolver:
-    """``solve(factor, b)``: ``A^-1 b`` for cvxopt's CHOLMOD factor ``factor`` of a real (k,k)
-    matrix ``A`` and ``b`` (k,r) float64; returns (k,r) Fortran-ordered float64."""
+    """``solve(factor, b, out=None)``: ``A^-1 b`` for cvxopt's CHOLMOD factor ``factor`` of a real
+    (k,k) matrix ``A`` and ``b`` (k,r) float64, written into ``out`` (k,r) when given (copied once
+    from CHOLMOD's result) and returned; without ``out``, a new (k,r) Fortran-ordered array."""
 
     _loaded = None
     _lock = threading.Lock()
@@ -100,7 +96,7 @@ class BlockSolver:
                 continue
         return None
 
-    def solve(self, factor, b):
+    def solve(self, factor, b, out=None):
         name = self._capsule_name(factor)
         if name != CAPSULE:
             raise ValueError(f"not cvxopt's factor of a real matrix: {name!r}")
@@ -118,8 +114,12 @@ class BlockSolver:
                 x = X.contents
                 if (x.nrow, x.ncol, x.d) != (k, r, k):
                     raise ArithmeticError("CHOLMOD's solve returned a matrix of another shape")
-                out = np.ctypeslib.as_array(ctypes.cast(x.x, ctypes.POINTER(ctypes.c_double)),
-                                            shape=(r, k)).T.copy(order='F')
+                got = np.ctypeslib.as_array(ctypes.cast(x.x, ctypes.POINTER(ctypes.c_double)),
+                                            shape=(r, k)).T
+                if out is None:
+                    out = got.copy(order='F')
+                else:
+                    out[...] = got
             finally:
                 self._lib.cholmod_l_free_dense(ctypes.byref(X), common)
         finally:

@@ -301,7 +301,7 @@ class Factor:
         if block is not None:
             w = max(1, CHOLMOD_BLOCK_BYTES // (8 * b.shape[0]))
             for c0 in range(0, b.shape[1], w):
-                x[:, c0:c0 + w] = block.solve(self._chol, b[:, c0:c0 + w])
+                block.solve(self._chol, b[:, c0:c0 + w], out=x[:, c0:c0 + w])
             return x
         for c0 in range(0, b.shape[1], CHOLMOD_BLOCK):
             B = _cvx_matrix(np.asfortranarray(b[:, c0:c0 + CHOLMOD_BLOCK]))
