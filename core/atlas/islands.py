@@ -36,6 +36,7 @@ from ..mesh import topology
 from ..mesh.repair import repair, zero_area_note
 from ..disk.flatten import MU_WARN, QC_WARN
 from .charts import split_overlaps
+from .repeats import Repeats
 from .cut import Cut, _seam_halfedges, boundary_crossings, cut_along_seams, seam_pairs, shelf_pack  # noqa: F401
 from ..mesh.validate import (DEFAULT_MAX_FACES, check_arrays, degenerate_faces, loose_edge_count,
                              normalise_scale)
@@ -613,6 +614,7 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
     weights = np.cumsum([0] + [len(f) for f in island_faces]) / max(1, len(R.F))
     tri_of = R.face_map                                  # input face of each repaired face
     pieces = []                                          # (faces of R.F, Fp, vert_of (input), uv, rep)
+    repeats = Repeats()                                  # islands of the same shape are solved once
     for i, faces in enumerate(island_faces):
         lo, hi = cut.vert_start[i], cut.vert_start[i + 1]
         Fi = cut.F[faces] - lo
@@ -623,9 +625,16 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
         def sub(f, msg, base=base, span=span, i=i):
             report_progress(base + span * f, f"island {i + 1}/{n_cut}: {msg}")
 
+        poly_i = None if tri_poly is None else tri_poly[tri_of[faces]]
         try:
-            got = _solve_island(Vi, Fi, holes, boundary, desc, sub, options,
-                                poly=None if tri_poly is None else tri_poly[tri_of[faces]])
+            same = repeats.find(Vi, Fi, poly_i)
+            if same is None:
+                got = _solve_island(Vi, Fi, holes, boundary, desc, sub, options, poly=poly_i)
+                repeats.add(Vi, Fi, poly_i, desc, got)
+            else:
+                got = same[1]
+                for r in (g[4] for g in got):
+                    r['repeat_of'], r['seconds'] = same[0], 0.0
             for fl, Fp, pv, ui, r in got:
                 pieces.append((faces[fl], Fp, R.vert_map[cut.vert_of[lo + pv]], ui, r, desc))
         except ConformalError as exc:
@@ -734,6 +743,7 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
         'holes_filled': int(sum(r.get('holes', {}).get('filled', 0) for r in rep_ok
                                 if r.get('holes', {}).get('mode') == 'fill')),
         'holes_cut': int(sum(r.get('holes', {}).get('cut', 0) for r in rep_ok)),
+        'repeated_islands': int(sum('repeat_of' in r for r in rep_ok)),
         'flips': int(sum(r['flips'] for r in rep_ok)),
         'overlaps': int(sum(r['overlaps'] for r in rep_ok)),
         'qc_mean_worst': float(max(r['qc_mean'] for r in rep_ok)),
