@@ -909,6 +909,12 @@ ERR_RELAX = 0.005      # on-mesh term: ERR_RELAX * area fraction of the under-re
 ERR_MESH = 0.1         # mesh term: ERR_MESH * mu_spread (area-weighted mean of the per-triangle spread)
 ERR_ANISO = 0.006      # metric term: ERR_ANISO * metric_excess (area-weighted mean anisotropy - 1)
 ANISO_CAP = 4.0        # a triangle's anisotropy counts at most this much in ``metric_excess`` (slivers)
+# the metric term with fewer re-marches (an automatic grid takes as few as its target allows,
+# ``metric_passes_for``): the isotropic march alone leaves about PASS_ERROR[0] * excess (measured
+# 0.04-0.127 on the surfaces at n = 65 and a head cut, the most on ridge), one re-march about
+# PASS_ERROR[1] * excess^2 (measured 0.65-1.1, cheburashka's head the most)
+PASS_ERROR = (0.13, 1.1)
+PASS_SHARE = 0.5       # a re-march is left out where the metric term stays within this share of the target
 TYPICAL_DISTANCE = 0.35  # before a query, the median distance is taken as this times the 3D bbox diagonal
 NODE_BUDGET = 4096 * 4096  # automatic grids of all islands together use at most this many nodes
 
@@ -953,16 +959,37 @@ def grid_coefficient(reflex: float) -> float:
     return ERR_GRID_C0 + ERR_GRID_C1 * min(reflex, REFLEX_CAP)
 
 
+def metric_error(excess: float, passes: int = METRIC_PASSES) -> float:
+    """The metric term of the estimate (dimensionless) for a map of ``metric_excess`` ``excess``
+    marched with ``passes`` re-marches: ``ERR_ANISO * excess`` after ``METRIC_PASSES``, at least
+    ``PASS_ERROR[passes] * excess^(passes + 1)`` after fewer."""
+    term = ERR_ANISO * excess
+    if passes < METRIC_PASSES:
+        term = max(term, PASS_ERROR[passes] * excess ** (passes + 1))
+    return float(term)
+
+
+def metric_passes_for(excess: float, target: float) -> int:
+    """The fewest re-marches (0 to ``METRIC_PASSES``) whose metric term (``metric_error``) on a map of
+    ``metric_excess`` ``excess`` stays within ``PASS_SHARE`` of the error ``target`` (each re-march is
+    a whole march: a nearly conformal map, bump's, needs none for a 0.1 % target)."""
+    for passes in range(METRIC_PASSES):
+        if metric_error(excess, passes) <= PASS_SHARE * target:
+            return passes
+    return METRIC_PASSES
+
+
 def error_estimate(cell: float, distance: float, spread: float, reflex: float, free: float = 0.0,
-                   excess: float = 0.0) -> float:
+                   excess: float = 0.0, passes: int = METRIC_PASSES) -> float:
     """Estimated mean relative error (dimensionless) of the distances on a chart whose mean surface
     cell is ``cell`` (``surface_cell`` over the resolved triangles, mesh units), for a query whose
     median distance is ``distance`` (mesh units), on a map with ``mu_spread`` ``spread`` and
-    ``metric_excess`` ``excess`` over a domain with ``reflex_turning`` ``reflex``, with the area
-    fraction ``free`` under-resolved (on-mesh fast marching): ``grid_coefficient(reflex) * cell /
-    distance + ERR_MESH * spread + ERR_ANISO * excess + ERR_RELAX * free``."""
+    ``metric_excess`` ``excess`` marched with ``passes`` re-marches over a domain with
+    ``reflex_turning`` ``reflex``, with the area fraction ``free`` under-resolved (on-mesh fast
+    marching): ``grid_coefficient(reflex) * cell / distance + ERR_MESH * spread + metric_error(excess,
+    passes) + ERR_RELAX * free``."""
     return float(grid_coefficient(reflex) * cell / max(distance, 1e-300) + ERR_MESH * spread
-                 + ERR_ANISO * excess + ERR_RELAX * free)
+                 + metric_error(excess, passes) + ERR_RELAX * free)
 
 
 def typical_distance(V: np.ndarray) -> float:
@@ -1156,7 +1183,7 @@ def paths_choice(ch, method, grid, mu_mode):
     m, ne = len(ch.F), len(unique_edges(ch.F)[0])
     if method == 'paths':
         return path_points(m, ne) or PATH_K[-1]
-    marches = 1 + (METRIC_PASSES if mu_mode == 'metric' else 0)
+    marches = 1 + (ch.planned_passes if mu_mode == 'metric' else 0)
     k = path_points(m, ne, min(PATH_BUDGET, PATH_COST * ch.nodes * marches), PATH_K[0], PATH_K_MAX)
     if k is None:
         kb = path_points(m, ne)
@@ -1198,6 +1225,9 @@ class Chart:
         self.reflex = reflex_turning(uv, F)
         self.target = target
         self.limit, self.grid_estimate = None, None
+        # re-marches with the exact metric: as few as the target allows on an automatic grid, all of
+        # them on a given one (its error then falls with the grid)
+        self.planned_passes = METRIC_PASSES if grid is not None else metric_passes_for(self.excess, target)
         if grid is None:
             grid, self.limit, self.grid_estimate = default_grid_for_target(V, F, uv, mu_f, self.spread,
                                                                            self.reflex, target)
@@ -1230,7 +1260,7 @@ class Chart:
         self.gap = gap_in
         self.corner_ok = sample_corners(G, F, G.coords(uv), fine)
         self.march_on = valid & ~bridging_rim(G, F, valid) & ~self.gap & ~gap_rim
-        self.metric_passes = METRIC_PASSES if self.ginv is not None else 0
+        self.metric_passes = self.planned_passes if self.ginv is not None else 0
         self.seed_metric = None
         if self.ginv is not None:
             a, b, c = self.ginv.T
@@ -1250,7 +1280,7 @@ class Chart:
         self.P = G.coords(uv)
         self.cell = surface_cell(mu_f, self.area, G.h, ~self.unresolved)
         self.error_estimate = error_estimate(self.cell, typical_distance(self.V), self.spread, self.reflex,
-                                             self.free_frac, self.excess)
+                                             self.free_frac, self.excess, self.metric_passes)
         return self
 
     def node_points(self, ii, jj):
@@ -1696,7 +1726,7 @@ class GeodesicSolver:
             dc = dist_s[ch.verts]
             dc = dc[np.isfinite(dc) & (dc > 0)]
             ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.spread,
-                                       ch.reflex, ch.free_frac, ch.excess))
+                                       ch.reflex, ch.free_frac, ch.excess, ch.metric_passes))
         est = max(ests)
         warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w] + \
             [w for w in thin if w]
