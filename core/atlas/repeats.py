@@ -43,6 +43,11 @@ def principal_frame(V: np.ndarray):
     return a @ R, float(np.sqrt((a * a).sum(1).max())), w
 
 
+def side_lengths(V, F):
+    """The lengths (3m,) of the sides of the triangles ``F`` (m,3) on ``V`` (n,3), sorted."""
+    return np.sort(np.linalg.norm(V[F] - V[F[:, [1, 2, 0]]], axis=2).ravel())
+
+
 def _fan_centroids(P, F):
     """Mean (n,3) of the centroids of the triangles ``F`` (m,3) at each vertex of ``P`` (n,3)."""
     C = np.zeros_like(P)
@@ -73,6 +78,10 @@ def match(V0, F0, poly0, V, F, poly, tol=REPEAT_TOL):
     P0, r0, w0 = principal_frame(V0)
     P, r, w = principal_frame(V)
     if not r0 > 0 or abs(r - r0) > tol * r0 or np.abs(w - w0).max() > 4 * tol * r0 * r0 * len(V):
+        return None
+    # the same mesh moved has the same side lengths: a cheap test before the matching (spot's two
+    # halves have the same vertices, triangulated differently)
+    if np.abs(side_lengths(V0, F0) - side_lengths(V, F)).max() > 2 * tol * r0:
         return None
     gaps = np.diff(w0)
     if gaps.min() <= 1e-6 * max(w0[-1], 1e-300):
