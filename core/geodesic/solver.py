@@ -70,6 +70,7 @@ MU_MODES = ('metric', 'vertex', 'face')
 GRID_MIN, GRID_MAX = 64, 4096
 GRID_AUTO_MIN = 256          # the automatic grid never goes below this (nodes along the longer side)
 GRID_AUTO_MAX = 4096         # nor above this; a warning says when the error target needs more
+GRID_NODES_PER_EDGE = 6.0    # nor below this many nodes per mean UV edge (8 before the nineteenth round)
 ERROR_TARGET = 1e-3          # default target for the estimated mean relative error (0.1 %)
 RIM = 1
 # SEED_RADIUS: the default radius of the exact seed disk around a source, in grid cells (one meaning
@@ -429,12 +430,12 @@ def bilinear(field, pts, valid=None, corner_ok=None):
 
 
 def default_grid(V, F, uv):
-    """Automatic grid size (nodes along the longer UV side): about 8 nodes per mean UV edge length,
-    rounded up to a multiple of 64 and clipped to 256..2048."""
+    """Automatic grid size (nodes along the longer UV side): about ``GRID_NODES_PER_EDGE`` nodes per
+    mean UV edge length, rounded up to a multiple of 64 and clipped to 256..2048."""
     E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     le = np.linalg.norm(uv[E[:, 0]] - uv[E[:, 1]], axis=1).mean()
     ext = np.ptp(uv[np.unique(F)], axis=0).max()
-    g = 8.0 * ext / max(le, 1e-300)
+    g = GRID_NODES_PER_EDGE * ext / max(le, 1e-300)
     return int(np.clip(64 * np.ceil(g / 64), 256, 2048))
 
 
