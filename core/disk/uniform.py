@@ -198,13 +198,16 @@ def _model_lp(s, JF, c, delta, reg_w, active=200, max_rounds=6, max_add=1000, se
         inside[side][first] = True
         lp.add(s[first], JF[first], side)
     best = (None, None)
+    fresh = False                                 # a is the optimum of the solver's rows as they are
     for _ in range(max_rounds):
         s_r, J_r = s[rows], JF[rows]              # the round's rows, sliced once (not per solve)
         in_r = {side: inside[side][rows] for side in (1, -1)}
         while True:                               # the exact optimum over ``rows``
-            a, _ = lp.solve()
-            if a is None:
-                return best
+            if not fresh:                         # (a new round alone adds no row: no solve again)
+                a, _ = lp.solve()
+                if a is None:
+                    return best
+                fresh = True
             t1, t0 = lp.bounds
             m = s_r + J_r @ (a - c)
             added = 0
@@ -218,6 +221,7 @@ def _model_lp(s, JF, c, delta, reg_w, active=200, max_rounds=6, max_add=1000, se
                 added += len(add)
             if not added:
                 break
+            fresh = False
         model = s + JF @ (a - c)
         spread = float(model.max() - model.min())
         if best[1] is None or spread < best[1]:
