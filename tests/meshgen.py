@@ -189,3 +189,37 @@ def capped_cylinder(n=48, rings=12, r=1.0, height=1.5):
     F += [np.c_[np.full(n, bot), (k + 1) % n, k],
           np.c_[np.full(n, top), rings * n + k, rings * n + (k + 1) % n]]
     return V, np.concatenate(F)
+
+
+def icosphere(level=3):
+    """Unit sphere (V (n,3), F (m,3), counter-clockwise seen from outside): the icosahedron with every
+    triangle split in four ``level`` times, the new vertices pushed onto the sphere."""
+    t = (1 + 5 ** 0.5) / 2
+    V = np.array([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t], [0, -1, -t],
+                  [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], float)
+    F = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+                  [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
+                  [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    V = V / np.linalg.norm(V, axis=1)[:, None]
+    for _ in range(level):
+        E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+        ue, inv = np.unique(E, axis=0, return_inverse=True)
+        mid = V[ue].mean(1)
+        V = np.concatenate([V, mid / np.linalg.norm(mid, axis=1)[:, None]])
+        a, b, c = F.T
+        ab, bc, ca = (len(V) - len(ue) + inv.ravel()).reshape(3, -1)
+        F = np.concatenate([np.stack(x, 1) for x in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    return V, F
+
+
+def jagged_cap(level=5, jitter=0.02, seed=1):
+    """A hemisphere of the ``icosphere`` tilted at random and cut along its triangles (those whose
+    centroid lies above the cut plane): a disk whose boundary zigzags, like a scan cut out of a bigger
+    one; vertices jittered by ``jitter`` mean edge lengths. Returns V (n,3), F (m,3)."""
+    V, F = icosphere(level)
+    rng = np.random.default_rng(seed)
+    V = V @ np.linalg.qr(rng.standard_normal((3, 3)))[0].T
+    used, Fl = np.unique(F[V[F].mean(1)[:, 2] > 0.0], return_inverse=True)
+    V, F = V[used], Fl.reshape(-1, 3)
+    e = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
+    return V + rng.standard_normal(V.shape) * jitter * e, F

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from conftest import DATA
+from meshgen import jagged_cap
 from core.geodesic import solver as geo
+from core.mesh import topology
 from core.cli import main
 from core.geodesic.eikonal import sweep, travel_time
 from core.errors import ConformalError
@@ -273,6 +275,23 @@ def test_the_automatic_grid_takes_as_few_re_marches_as_its_target_allows(bump65)
     assert geo.metric_passes_for(0.0235, geo.ERROR_TARGET) == geo.METRIC_PASSES
     assert geo.metric_passes_for(0.016, geo.ERROR_TARGET) == 1
     assert geo.metric_error(0.0235, 0) > geo.metric_error(0.0235, 1) > geo.metric_error(0.0235, 2)
+
+
+def test_a_source_on_a_jagged_boundary_seeds_no_node_it_cannot_see():
+    """A cap cut along its triangles has a zigzag boundary. From a source on it, grid nodes behind the
+    notches are hidden from the seed's straight segments; with the seed's level at its full radius
+    they started at that level, too late, and so did what the front reached through them (measured
+    0.19 % mean, 10.1 % max against the surface paths). The level now stays below every hidden node,
+    at least 10 cells (0.039 %, 0.91 %)."""
+    V, F = jagged_cap(5, 0.02)
+    src = int(np.argmin(V[:, 2]))                     # on the cut
+    loops = topology.boundary_loops(F, len(V))
+    assert src in np.concatenate([np.asarray(lp) for lp in loops])
+    ref, _ = geo.GeodesicSolver(V, F, method='paths', steiner_points=15).distance([src])
+    d, rep = geo.GeodesicSolver(V, F, method='grid').distance([src])
+    far = np.linalg.norm(V - V[src], axis=1) > 0.02 * np.linalg.norm(np.ptp(V, axis=0))
+    err = np.abs(d - ref)[far] / ref[far]
+    assert err.mean() < 1e-3 and err.max() < 0.02, (err.mean(), err.max())
 
 
 def test_refined_seed_at_a_strongly_curved_coarse_source():
