@@ -443,13 +443,14 @@ def default_grid(V, F, uv):
 
 
 
-def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None, metric=None):
+def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None, metric=None, straight=False):
     """Flat-chart times (``_chart_time``, ``inv_mu`` the grid field 1/mu) from the sources ``S`` (k,2,
     node coordinates). With ``pts`` None:
     on the grid, over a window of ``radius_nodes + 2`` around each source, returns (ny, nx) with inf
     outside the windows. With ``pts`` (q,2 node coordinates): at those points (q,), from the nearest
     source in node units only (others inf). ``domain`` (ny, nx) bool: the inside nodes; segments that
-    leave them give inf (``_visible``)."""
+    leave them give inf (``_visible``). ``straight`` (grid only): also the times along every segment,
+    also those that leave the domain (for ``hidden_seed_level``): returns the two grids."""
     h = grid.h
     if pts is None:
         w = int(np.ceil(radius_nodes)) + 2
@@ -459,6 +460,7 @@ def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None, me
         oi, oj = oi.ravel()[inside], oj.ravel()[inside]
         ny, nx = grid.shape
         out = np.full(grid.shape, np.inf)
+        out_all = np.full(grid.shape, np.inf) if straight else None
         step = max(1, 2_000_000 // len(oi))                      # sources per block
         for s0 in range(0, len(S), step):
             Sb = S[s0:s0 + step]
@@ -470,8 +472,15 @@ def _local_times(grid, inv_mu, valid, S, radius_nodes, pts=None, domain=None, me
             keep = valid[ii, jj]
             ii, jj, src = ii[keep], jj[keep], src[keep]
             P = np.stack([jj, ii], 1).astype(np.float64)
-            np.minimum.at(out, (ii, jj), _chart_time(inv_mu, valid, Sb[src], P, h, domain, metric))
-        return out
+            if straight:
+                T = _chart_time(inv_mu, valid, Sb[src], P, h, None, metric)
+                np.minimum.at(out_all, (ii, jj), T)
+                if domain is not None:
+                    T = np.where(_visible(domain, Sb[src], P), T, np.inf)
+            else:
+                T = _chart_time(inv_mu, valid, Sb[src], P, h, domain, metric)
+            np.minimum.at(out, (ii, jj), T)
+        return (out, out_all) if straight else out
     # at arbitrary points: nearest sources by a KD-tree
     from scipy.spatial import cKDTree
     d, k = cKDTree(S).query(pts)
@@ -1847,10 +1856,10 @@ class GeodesicSolver:
                 fine_marches += sum(f[3] for f in sub)
             else:
                 tau = radius * G.h / float(mu_s[idx].min())
-                Tloc = _local_times(G, inv_mu, valid, S[idx], reach, domain=march_on, metric=ch.seed_metric)
-                tau = hidden_seed_level(Tloc, _local_times(G, inv_mu, valid, S[idx], reach,
-                                                           metric=ch.seed_metric),
-                                        march_on, tau, HIDDEN_MIN_CELLS * G.h / float(mu_s[idx].min()))
+                Tloc, Tstraight = _local_times(G, inv_mu, valid, S[idx], reach, domain=march_on,
+                                               metric=ch.seed_metric, straight=True)
+                tau = hidden_seed_level(Tloc, Tstraight, march_on, tau,
+                                        HIDDEN_MIN_CELLS * G.h / float(mu_s[idx].min()))
                 Tloc = self._exact_seed(ch, Tloc, tree, X_src, upper, src_local, src_faces)
                 sub = None
             h_far = 4.0 * G.h
