@@ -23,6 +23,7 @@ precision (relative spacing 6e-8), so a copy rotated by a modifier differs from 
 1e-7: the tolerance accepts that, and no difference a map could show.
 """
 import copy
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -67,45 +68,79 @@ def _canonical_rows(F):
     return np.take_along_axis(F, idx, 1), turn
 
 
+class Shape:
+    """An island kept for matching: positions ``V`` (n,3), triangles ``F`` (m,3), polygons ``poly``
+    (m,) or None, and what ``match_shape`` compares against, each computed once, when a candidate
+    first needs it: the principal frame, the sorted side lengths, a KD-tree of (position, fan
+    centroid) in that frame, and the triangles' canonical rows in sorted order."""
+
+    def __init__(self, V, F, poly=None):
+        self.V, self.F = np.array(V, float), np.array(F, np.int64)
+        self.poly = None if poly is None else np.array(poly)
+
+    @cached_property
+    def frame(self):
+        return principal_frame(self.V)
+
+    @cached_property
+    def sides(self):
+        return side_lengths(self.V, self.F)
+
+    @cached_property
+    def tree(self):
+        P = self.frame[0]
+        return cKDTree(np.hstack([P, _fan_centroids(P, self.F)]))
+
+    @cached_property
+    def canonical(self):
+        """(rows (m,3) in sorted order, turn (m,), order (m,)): ``_canonical_rows`` of ``F``, sorted."""
+        rows, turn = _canonical_rows(self.F)
+        order = np.lexsort(rows.T[::-1])
+        return rows[order], turn, order
+
+
 def match(V0, F0, poly0, V, F, poly, tol=REPEAT_TOL):
-    """Correspondence of the island ``V`` (n,3), ``F`` (m,3), ``poly`` (m,) or None onto the island
-    ``V0``, ``F0``, ``poly0``: (vertex (n,) vertex of the original of each vertex, face (m,) triangle of
-    the original of each triangle, shift (m,), mirror (bool)): corner ``c`` of a triangle is the
-    original's corner ``(CORNERS[mirror][c] + shift) % 3``. None when they are not the same mesh up to
-    a rotation and a translation, or a reflection with the triangles turned the other way."""
-    if V0.shape != V.shape or F0.shape != F.shape or (poly0 is None) != (poly is None):
+    """``match_shape`` of the island ``V``, ``F``, ``poly`` onto the island ``V0`` (n,3), ``F0`` (m,3),
+    ``poly0`` (m,) or None."""
+    return match_shape(Shape(V0, F0, poly0), V, F, poly, tol)
+
+
+def match_shape(shape, V, F, poly, tol=REPEAT_TOL):
+    """Correspondence of the island ``V`` (n,3), ``F`` (m,3), ``poly`` (m,) or None onto the ``Shape``
+    ``shape``: (vertex (n,) vertex of the original of each vertex, face (m,) triangle of the original
+    of each triangle, shift (m,), mirror (bool)): corner ``c`` of a triangle is the original's corner
+    ``(CORNERS[mirror][c] + shift) % 3``. None when they are not the same mesh up to a rotation and a
+    translation, or a reflection with the triangles turned the other way."""
+    if shape.V.shape != V.shape or shape.F.shape != F.shape or (shape.poly is None) != (poly is None):
         return None
-    P0, r0, w0 = principal_frame(V0)
+    _, r0, w0 = shape.frame
     P, r, w = principal_frame(V)
     if not r0 > 0 or abs(r - r0) > tol * r0 or np.abs(w - w0).max() > 4 * tol * r0 * r0 * len(V):
         return None
     # the same mesh moved has the same side lengths: a cheap test before the matching (spot's two
     # halves have the same vertices, triangulated differently)
-    if np.abs(side_lengths(V0, F0) - side_lengths(V, F)).max() > 2 * tol * r0:
+    if np.abs(shape.sides - side_lengths(V, F)).max() > 2 * tol * r0:
         return None
-    gaps = np.diff(w0)
-    if gaps.min() <= 1e-6 * max(w0[-1], 1e-300):
+    if np.diff(w0).min() <= 1e-6 * max(w0[-1], 1e-300):
         return None                                   # axes not determined: no frame to match in
     # each vertex is told apart by its position and the centroid of its triangles' centroids: vertices
     # at one point (a pole, a pinch) belong to different triangles
-    tree = cKDTree(np.hstack([P0, _fan_centroids(P0, F0)]))
     C = _fan_centroids(P, F)
-    rows0, turn0 = _canonical_rows(F0)
-    o0 = np.lexsort(rows0.T[::-1])
+    rows0, turn0, order0 = shape.canonical
     for signs in SIGNS:
         s = np.array(signs, float)
         mirror = s.prod() < 0
-        dist, vertex = tree.query(np.hstack([P * s, C * s]))
+        dist, vertex = shape.tree.query(np.hstack([P * s, C * s]))
         if dist.max() > tol * r0 or len(np.unique(vertex)) != len(vertex):
             continue
         rows, turn = _canonical_rows(vertex[F[:, CORNERS[mirror]]])
         o = np.lexsort(rows.T[::-1])
-        if not np.array_equal(rows0[o0], rows[o]):
+        if not np.array_equal(rows0, rows[o]):
             continue
         face = np.empty(len(F), np.int64)
-        face[o] = o0
+        face[o] = order0
         if poly is not None:
-            pairs = np.unique(np.stack([poly, poly0[face]], 1), axis=0)
+            pairs = np.unique(np.stack([poly, shape.poly[face]], 1), axis=0)
             if len(np.unique(pairs[:, 0])) != len(pairs) or len(np.unique(pairs[:, 1])) != len(pairs):
                 continue
         return vertex, face, (turn0[face] - turn) % 3, bool(mirror)
@@ -117,15 +152,15 @@ class Repeats:
 
     def __init__(self, tol: float = REPEAT_TOL):
         self.tol = tol
-        self._seen = {}                       # (n, m) -> [(V, F, poly, desc, pieces)]
+        self._seen = {}                       # (n, m) -> [(Shape, desc, pieces)]
 
     def find(self, V, F, poly=None):
         """(desc of the island it repeats, that island's pieces renumbered for this one) for the island
         ``V`` (n,3), ``F`` (m,3), ``poly`` (m,) or None, or None if no island solved so far has its
         shape. A piece is ``(faces (k,) rows of F, Fp (k,3) piece vertex ids, pv (N,) local vertex of
         each piece vertex, uv (N,2), report)``, as ``_solve_island`` returns them."""
-        for V0, F0, poly0, desc, pieces in self._seen.get((len(V), len(F)), ()):
-            got = match(V0, F0, poly0, V, F, poly, self.tol)
+        for shape, desc, pieces in self._seen.get((len(V), len(F)), ()):
+            got = match_shape(shape, V, F, poly, self.tol)
             if got is None:
                 continue
             vertex, face, shift, mirror = got
@@ -147,6 +182,4 @@ class Repeats:
     def add(self, V, F, poly, desc, pieces):
         """Keep the solved ``pieces`` of the island ``desc`` with positions ``V`` (n,3), ``F`` (m,3)
         and ``poly`` (m,) or None."""
-        self._seen.setdefault((len(V), len(F)), []).append(
-            (np.array(V, float), np.array(F, np.int64), None if poly is None else np.array(poly),
-             desc, copy.deepcopy(pieces)))
+        self._seen.setdefault((len(V), len(F)), []).append((Shape(V, F, poly), desc, copy.deepcopy(pieces)))
