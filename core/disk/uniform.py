@@ -21,7 +21,6 @@ no flipped triangle and conformality inside the budget.
 import numpy as np
 import scipy.sparse as sp
 
-from ..background import beside
 from ..errors import ConformalError
 from ..mesh.geometry import face_means
 from ..mesh.measures import singular_values
@@ -297,8 +296,9 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
 
     # the boundary response H (n, K) of u to the coefficients needs only L_II. With the Neumann factor
     # still on its way (SuperLU on big meshes) it is solved first, overlapping that factorisation;
-    # otherwise on its own thread while the area map is measured here (its solves leave the GIL free
-    # between column blocks, and numpy releases it in its loops)
+    # otherwise once the area map shows a gain is possible. (On a thread beside the area map's
+    # measures it gained nothing: both are memory-bound; 1M triangles 5.9-6.3 s against 5.3-5.4 s
+    # inline, 8k-400k triangles the same or 1-4 ms slower, docs/scale.md)
     H = system.harmonic(Phi) if system.conjugate_pending else None
     u0 = system.yamabe(np.zeros(nb))
     uv0 = system.map_from_u(u0)
@@ -309,12 +309,11 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
     spread0 = float(s0.max() - s0.min())
     flat = spread0 <= -np.log1p(-min_gain)
     progress(0.15, 'boundary response')
-    job = beside(len(system.F), system.harmonic, Phi) if H is None and not flat else None
     budget = []
 
     def qc_budget():
         """The conformality budget, measured on the area map the first time a step needs it (a
-        round that predicts no gain never pays for it: 0.6 s at 1M triangles, beside the response)."""
+        round that predicts no gain never pays for it: 0.6 s at 1M triangles)."""
         if not budget:
             qc0 = _qc_mean(system, uv0, keep)
             budget.append(qc0 + (max(0.5 * (qc0 - 1.0), 0.002) if qc_slack is None else qc_slack))
@@ -324,9 +323,9 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
                          'basis_size': int(Phi.shape[1]), 'qc_budget': round(qc_budget(), 5),
                          'area_certified': f"the area map's ratio is within {min_gain:g} of 1"}
     Fk = system.F[keep]
-    reps0 = _representatives(system, uv0, s0, keep, bins)      # the first round's, while H is solved
-    if job is not None:
-        H = job.result()
+    reps0 = _representatives(system, uv0, s0, keep, bins)      # the first round's
+    if H is None:
+        H = system.harmonic(Phi)
     # the linear model of s_T (face means of H) is needed only on each round's representatives,
     # never the whole (m, K) matrix (256 MB at 1M triangles)
     best = dict(c=np.zeros(Phi.shape[1]), u=u0, uv=uv0, s=s0, spread=float(s0.max() - s0.min()))
