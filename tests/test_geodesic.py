@@ -294,6 +294,37 @@ def test_a_source_on_a_jagged_boundary_seeds_no_node_it_cannot_see():
     assert err.mean() < 1e-3 and err.max() < 0.02, (err.mean(), err.max())
 
 
+def test_a_part_the_own_flattening_folds_is_answered_by_surface_paths(bump65, monkeypatch):
+    """A cap cut from cheburashka came out of the flattening with one flipped triangle, and the solver
+    refused the mesh ("geodesic distances need a fold-free map"). The paths need no map: such an
+    island is now answered by them. Here a flattening that flips one triangle stands in for it. A
+    given map that folds is still an error, and so is a grid asked for on the folded map."""
+    import core.disk.flatten as disk_flatten
+    V, F, uv, sources, D = bump65
+    real = disk_flatten.flatten
+
+    def folding(*args, **kwargs):
+        res = real(*args, **kwargs)
+        a, b, _ = F[100]
+        res.uv[[a, b]] = res.uv[[b, a]]                      # triangle 100 (and its neighbours) flip
+        return res
+    monkeypatch.setattr(disk_flatten, 'flatten', folding)
+    solver = geo.GeodesicSolver(V, F)
+    assert solver.report['folded_parts'] == 1
+    assert isinstance(solver.charts[0], geo.PathsChart)
+    s = int(sources[0])
+    d, rep = solver.distance([s])
+    mean, mx = rel_errors(V, d, D[0], s)
+    assert rep['paths_islands'] == 1 and mean < 1e-3 and mx < 0.02, (mean, mx)
+    with pytest.raises(ConformalError, match='flipped'):
+        geo.GeodesicSolver(V, F, grid=512)
+    bad = uv.copy()
+    a, b, _ = F[100]
+    bad[[a, b]] = bad[[b, a]]
+    with pytest.raises(ConformalError, match='flipped'):
+        geo.GeodesicSolver(V, F, uv=bad)
+
+
 def test_refined_seed_at_a_strongly_curved_coarse_source():
     """edgebump 65 from its peak (the vertex of largest angle defect, where the map is anisotropic per
     triangle and the grid has about one node per edge): the grid alone carries a deficit made near the

@@ -1382,8 +1382,12 @@ class GeodesicSolver:
     ``solver``: 'auto' (scikit-fmm if installed, else the numpy sweep), 'skfmm' or 'sweep'.
     ``mu_mode``: 'metric' (default: a first march with the per-vertex mu interpolated linearly, then
     ``METRIC_PASSES`` re-marches with the exact per-triangle metric of the map for the previous
-    march's gradient directions, ``directional_mu``; skipped on charts where the map is an exact
+    march's gradient directions, ``directional_mu``, on an automatic grid only as many as
+    ``error_target`` needs, ``metric_passes_for``; skipped on charts where the map is an exact
     similarity), 'vertex' (the first march only) or 'face' (piecewise constant per-triangle mu).
+    An island that the solver's own flattening folds (flipped triangles) is answered by surface
+    paths, which need no map (``report['folded_parts']``), unless a grid or ``method`` 'grid' is asked
+    for; a given ``uv`` that folds is an error.
     ``error_target``: the estimated mean relative error to reach (default 1e-3); a chart
     whose estimate stays above it gets a warning in every report. ``progress(fraction, message)``:
     optional callback. ``method``: 'grid' marches on every chart; 'paths' answers every island by
@@ -1538,8 +1542,15 @@ class GeodesicSolver:
                     try:
                         ch = Chart(Vs[verts], Fl, uvs[verts], verts, faces, grid, self.error_target, mu_mode)
                     except ConformalError as exc:
-                        raise (exc.with_context(f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles)")
-                               if len(cuts) else exc) from None
+                        own = report['boundary'] != 'given'
+                        if not (exc.code == 'degenerate' and own and method != 'grid' and grid is None
+                                and _fits_paths(Fl)):
+                            raise (exc.with_context(f"island {c + 1} of {len(cuts) + 1} ({len(faces)} "
+                                                    "triangles)") if len(cuts) else exc) from None
+                        # the solver's own flattening folded this island (a few flipped triangles): the
+                        # surface paths need no map (a cap cut from cheburashka: 1 flipped triangle)
+                        ch = PathsChart(Vs[verts], Fl, verts, faces)
+                        report['folded_parts'] = report.get('folded_parts', 0) + 1
             self.chart_of_split[verts] = c
             self.local_of_split[verts] = np.arange(len(verts))
             self.charts.append(ch)
