@@ -325,6 +325,36 @@ def test_a_part_the_own_flattening_folds_is_answered_by_surface_paths(bump65, mo
         geo.GeodesicSolver(V, F, uv=bad)
 
 
+def test_a_disk_pinched_at_a_vertex_is_measured_through_the_pinch():
+    """A strip bent round a ring whose two ends touch at one vertex (a non-manifold vertex: a cut cow
+    head had one) used to be refused ("split or rip them apart"). The surface paths take the surface
+    as it is: from next to the shared vertex on one end, the other end is reached through it, not
+    round the ring."""
+    ns, nt, R = 64, 5, 2.0
+    s_, t_ = np.meshgrid(np.linspace(0, 1, ns), np.linspace(0, 1, nt), indexing='ij')
+    r = R + t_ * (1 + s_)                                  # the ends meet only at t = 0
+    V = np.stack([r * np.cos(2 * np.pi * s_), r * np.sin(2 * np.pi * s_), 0.5 * t_ * s_], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(ns - 1), np.arange(nt - 1), indexing='ij')
+    a = (i * nt + j).ravel()
+    F = np.concatenate([np.stack([a, a + nt, a + nt + 1], 1), np.stack([a, a + nt + 1, a + 1], 1)])
+    pin, twin = 0, (ns - 1) * nt                           # (s, t) = (0, 0) and (1, 0): one point
+    assert np.allclose(V[pin], V[twin])
+    F[F == twin] = pin
+    keep = np.setdiff1d(np.arange(len(V)), [twin])
+    new = np.full(len(V), -1)
+    new[keep] = np.arange(len(keep))
+    V, F = V[keep], new[F]
+    solver = geo.GeodesicSolver(V, F)
+    assert solver.report['pinched_parts'] == 1
+    src = 1                                                # (s, t) = (0, 1/4), next to the pin
+    d, rep = solver.distance([src])
+    near_end = new[(ns - 2) * nt + 1]                      # (s, t) = (1 - 1/63, 1/4), past the pin
+    through = np.linalg.norm(V[src] - V[pin]) + np.linalg.norm(V[near_end] - V[pin])
+    assert d[near_end] <= 1.01 * through and d[near_end] < 0.1 * 2 * np.pi * R      # round the ring: 12.6
+    E = np.linalg.norm(V - V[src], axis=1)
+    assert (d >= E * (1 - 1e-9)).all() and np.isfinite(d).all()
+
+
 def test_refined_seed_at_a_strongly_curved_coarse_source():
     """edgebump 65 from its peak (the vertex of largest angle defect, where the map is anisotropic per
     triangle and the grid has about one node per edge): the grid alone carries a deficit made near the

@@ -1082,6 +1082,13 @@ def closed_parts(F, count, face_island):
     return ~open_part
 
 
+def _pinched(F, n):
+    """True if the triangles ``F`` (m,3) on ``n`` vertices pinch at a vertex (separate fans of
+    triangles touch there, ``vertex_fans``)."""
+    from ..mesh.topology import vertex_fans
+    return bool((vertex_fans(F, n) > 1).any())
+
+
 def _fits_paths(F):
     """True if surface paths fit their budget on the triangles ``F`` (m,3) (``path_points``)."""
     from ..mesh.topology import unique_edges
@@ -1387,7 +1394,8 @@ class GeodesicSolver:
     similarity), 'vertex' (the first march only) or 'face' (piecewise constant per-triangle mu).
     An island that the solver's own flattening folds (flipped triangles) is answered by surface
     paths, which need no map (``report['folded_parts']``), unless a grid or ``method`` 'grid' is asked
-    for; a given ``uv`` that folds is an error.
+    for; a given ``uv`` that folds is an error. So is a single open part pinched at a vertex
+    (``report['pinched_parts']``): the paths go through the pinch, which a flattening would split.
     ``error_target``: the estimated mean relative error to reach (default 1e-3); a chart
     whose estimate stays above it gets a warning in every report. ``progress(fraction, message)``:
     optional callback. ``method``: 'grid' marches on every chart; 'paths' answers every island by
@@ -1459,10 +1467,20 @@ class GeodesicSolver:
             say(0.0, 'flattening')
             from ..mesh.topology import boundary_loops
             Fo = F[~shut[face_island]]
+            single = bool(len(Fo)) and count == 1 and seams is None and self.on_mesh.all()
+            pinched = single and _pinched(F, self.n)
             if not len(Fo):
                 vert_of, Fs, uvs, face_island = np.zeros(0, np.int64), Fo, np.zeros((0, 2)), \
                     np.zeros(0, np.int64)
-            elif count == 1 and seams is None and self.on_mesh.all() and len(boundary_loops(F, self.n)) == 1:
+            elif pinched and method != 'grid' and _fits_paths(F):
+                # a disk pinched at a vertex (two fans of triangles touch there): a flattening would
+                # split the vertex, and paths through it would be lost; the surface paths take the
+                # surface as it is
+                shut[:] = cut_face[:] = True
+                report['cut_parts'], report['pinched_parts'] = 1, 1
+                vert_of, Fs, uvs, face_island = np.zeros(0, np.int64), Fo[:0], np.zeros((0, 2)), \
+                    np.zeros(0, np.int64)
+            elif single and not pinched and len(boundary_loops(F, self.n)) == 1:
                 from ..atlas.islands import boundary_crossings
                 from ..disk.flatten import flatten
                 res = flatten(V, F, boundary=boundary, fit='true_scale', bound=False)
