@@ -1489,7 +1489,8 @@ class GeodesicSolver:
                 folded = boundary_crossings(res.uv, boundary_loops(F, self.n)) > 0
                 if folded and method != 'grid' and _fits_paths(F):
                     # the map overlaps itself (a ramp of more than a turn): no grid can hold it (a few
-                    # flipped triangles only disturb it locally: they keep the grid)
+                    # flipped triangles without an overlap reach the chart, which sends the island to
+                    # surface paths too: ``folded_parts``)
                     shut[:] = cut_face[:] = True
                     report['cut_parts'] = 1
                     vert_of, Fs, uvs, face_island = np.zeros(0, np.int64), Fo[:0], np.zeros((0, 2)), \
