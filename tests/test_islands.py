@@ -384,6 +384,12 @@ def test_extreme_scale_is_warned():
     assert any('extreme scale variation' in w for w in res.islands[0]['warnings'])
     cut = unwrap(V, F, boundary='area')                      # auto: cut, uniform density
     assert cut.report['mu_ratio_worst'] > 0.5 and not cut.report['warnings']
+    # core.unwrap (the add-on's and the CLI's entry) says so too: it used to drop this warning
+    from core import unwrap as core_unwrap
+    top = core_unwrap(V, F, holes='fill', boundary='area')
+    assert top.report['mu_ratio_worst'] < 1e-4
+    assert sum('extreme scale variation' in w for w in top.warnings) == 1
+    assert not core_unwrap(V, F, boundary='area').warnings
 
 
 def _two_bumps():

@@ -18,8 +18,9 @@ What it does:
 3. Measures: the final layout is measured on the flattened triangles only (docs/math.md section 3):
    flips, mu ratio, qc; the per-triangle conformal factor ``mu`` and the per-vertex one
    (``core.mesh.measures.vertex_mu``, the area-weighted geometric mean) come with the result.
-4. Warnings: every island with flips, boundary overlaps, qc_mean above ``QC_WARN``, an optimiser
-   that did not converge, a failed certificate, or that failed and was skipped, gives one line in
+4. Warnings: every island with flips, boundary overlaps, qc_mean above ``QC_WARN``, a mu_ratio below
+   ``MU_WARN`` (texel density varying more than 10^4-fold), an optimiser that did not converge, a
+   failed certificate, or that failed and was skipped, gives one line in
    ``warnings``. A result with warnings is not a plain success.
 
 Units: UVs are in mesh units for ``fit='true_scale'`` (UV area = 3D area), in [0,1]^2 for
@@ -33,7 +34,7 @@ import numpy as np
 
 from ..blas import one_thread
 from ..errors import ConformalError
-from ..disk.flatten import flatten
+from ..disk.flatten import MU_WARN, flatten
 from ..mesh import topology
 from ..mesh.geometry import face_areas
 from ..mesh.repair import repair, zero_area_note
@@ -143,7 +144,8 @@ def _measure(V, F, uv_corner):
 
 def island_warnings(rep: dict, desc: str) -> list:
     """Quality warnings of one island report (not its failure): flips, overlaps, qc_mean above
-    ``QC_WARN``, an optimiser that did not converge, a failed certificate."""
+    ``QC_WARN``, a ``mu_ratio`` below ``MU_WARN``, an optimiser that did not converge, a failed
+    certificate."""
     out = []
     if rep.get('flips'):
         out.append(flip_warning(rep, desc))
@@ -152,6 +154,11 @@ def island_warnings(rep: dict, desc: str) -> list:
     if rep.get('qc_mean') is not None and rep['qc_mean'] > QC_WARN:
         out.append(f"{desc} is far from conformal (qc_mean {rep['qc_mean']:.3g} > {QC_WARN}): mesh too "
                    "coarse or too distorted for a good conformal map")
+    mu = rep.get('mu_ratio')
+    if mu is not None and not mu >= MU_WARN:
+        out.append(f"{desc} has extreme scale variation: mu_ratio {mu:.2g} (texel density varies more "
+                   f"than {1 / MU_WARN:.0e}-fold); mark seams that cut long or closed parts apart, or let "
+                   "the tool choose cones and seams")
     if rep.get('converged') is False:
         out.append(f"{desc}: the optimiser did not converge; the map is the best one found")
     if rep.get('bound_note'):
@@ -315,7 +322,7 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
             warnings.append(f"skipped {r['error']}")
             continue
         r['warnings'] = island_warnings(r, desc) + [f"{desc}: {w}" for w in r.get('warnings', [])
-                                                     if cones is not None]
+                                                     if cones is not None and 'scale variation' not in w]
         warnings += r['warnings']
     mirrored = summary.get('flips', 0) - sum(r.get('flips', 0) for r in islands if 'error' not in r)
     if mirrored > 0:
