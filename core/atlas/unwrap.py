@@ -34,7 +34,7 @@ import numpy as np
 
 from ..blas import one_thread
 from ..errors import ConformalError
-from ..disk.flatten import MU_WARN, flatten
+from ..disk.flatten import MU_WARN, QC_WARN, flatten
 from ..mesh import topology
 from ..mesh.geometry import face_areas
 from ..mesh.repair import repair, zero_area_note
@@ -44,7 +44,6 @@ from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_mesh, degenerat
 from .islands import boundary_crossings, seam_pairs, shelf_pack
 from .islands import unwrap as unwrap_islands
 
-QC_WARN = 1.5            # an island whose area-weighted mean quasi-conformal distortion exceeds this warns
 MEASURE_KEYS = ('faces', 'flips', 'mu_ratio', 'mu_ratio_p1_p99', 'qc_mean', 'qc_max')
 
 
