@@ -288,12 +288,43 @@ def test_flatten_same_map_with_nested_dissection(monkeypatch, method):
         assert b.report[key] == pytest.approx(a.report[key], rel=1e-9)
 
 
-def test_deferred_factor_in_turn_gives_the_same_map(monkeypatch):
+def test_cholmod_factorize_without_the_gil_matches_cvxopt(monkeypatch):
+    """The numeric factorisation through ctypes (``BlockSolver.factorize``, the GIL free) fills
+    cvxopt's symbolic factor with the factor cvxopt's own ``numeric`` computes: the same solves to
+    1e-12, also for two factorisations at once on two threads; a matrix that is not positive
+    definite raises ArithmeticError there, and ``Factor`` falls back to SuperLU."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from core.mesh.cholmod_block import BlockSolver
+    assert BlockSolver.load() is not None
+    K1, K2 = _interior_laplacian('ridge', 41), _interior_laplacian('bump', 37)
+    B1 = np.random.default_rng(2).standard_normal((K1.shape[0], 3))
+    B2 = np.random.default_rng(3).standard_normal((K2.shape[0], 3))
+    with ThreadPoolExecutor(2) as ex:
+        f1, f2 = ex.map(lambda K: solve.Factor(K, method='cholmod'), (K1, K2))
+    X1, X2 = f1.solve(B1), f2.solve(B2)
+    monkeypatch.setattr(BlockSolver, 'load', classmethod(lambda cls: None))   # cvxopt's numeric
+    g1, g2 = solve.Factor(K1, method='cholmod'), solve.Factor(K2, method='cholmod')
+    assert f1.backend == g1.backend == 'cholmod'
+    for X, g, B in ((X1, g1, B1), (X2, g2, B2)):
+        ref = g.solve(B)
+        assert np.abs(X - ref).max() < 1e-12 * np.abs(ref).max()
+    monkeypatch.undo()
+    from cvxopt import cholmod, spmatrix
+    A = spmatrix([1.0, 2.0, 1.0], [0, 1, 1], [0, 0, 1], (2, 2))             # eigenvalues 1 +- 2
+    with pytest.raises(ArithmeticError):
+        BlockSolver.load().factorize(cholmod.symbolic(A), np.array([0, 2, 3]), np.array([0, 1, 1]),
+                                     np.array([1.0, 2.0, 1.0]))
+
+
+@pytest.mark.parametrize('method', ['superlu', 'cholmod'])
+def test_deferred_factor_in_turn_gives_the_same_map(monkeypatch, method):
     """Above PARALLEL_MAX rows the two factorisations run in turn, the second on its own thread
     (FactorJob) while the first one's solves go on: the same map, and a singular matrix still raises
-    ConformalError, from result()."""
+    ConformalError, from result(). Both backends release the GIL while they factor (CHOLMOD through
+    ``cholmod_block``)."""
     V, F = make_surface('ridge', 49)
-    monkeypatch.setenv('CONFORMAL_SOLVER', 'superlu')          # the SuperLU path (CHOLMOD runs in turn)
+    monkeypatch.setenv('CONFORMAL_SOLVER', method)
     a = [flatten(V, F, boundary=mode, bound=False) for mode in ('area', 'uniform')]
     monkeypatch.setattr(solve, 'PARALLEL_MAX', 100)
     monkeypatch.setattr(solve, 'WORKERS', 2)

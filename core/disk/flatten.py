@@ -123,8 +123,8 @@ class DiskSystem:
         if neumann and len(self.I):
             # L_II for the Yamabe and harmonic solves, L without one vertex for the conjugate; on big
             # meshes both in one nested dissection order of the vertices (docs/scale.md)
-            # (CHOLMOD: in turn; the SuperLU fallback above PARALLEL_MAX rows: in turn, the second on a
-            # thread that the first solves overlap, FactorJob)
+            # (above PARALLEL_MAX rows: in turn, the second on a thread that the first one's solves
+            # overlap, FactorJob; below: on two threads at once)
             order = fill_order(V, self.L)
             self._II, self._neumann = factor_all(self.L_II, self.L[keep][:, keep], defer_last=True,
                                                  orders=(sub_order(order, self.I), sub_order(order, keep)))

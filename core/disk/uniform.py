@@ -295,7 +295,7 @@ def optimise(system, n_freq=None, max_iter=10, max_maps=8, qc_slack=None, active
         return s
 
     # the boundary response H (n, K) of u to the coefficients needs only L_II. With the Neumann factor
-    # still on its way (SuperLU on big meshes) it is solved first, overlapping that factorisation;
+    # still on its way (big meshes) it is solved first, overlapping that factorisation;
     # otherwise once the area map shows a gain is possible. (On a thread beside the area map's
     # measures it gained nothing: both are memory-bound; 1M triangles 5.9-6.3 s against 5.3-5.4 s
     # inline, 8k-400k triangles the same or 1-4 ms slower, docs/scale.md)

@@ -3,8 +3,9 @@
 Two backends (docs/scale.md):
 
 - ``cholmod``: CHOLMOD's supernodal sparse Cholesky factorisation ``K = L L^T`` with an optimised
-  BLAS, through cvxopt's ``cholmod`` module, when its wheel is installed; solves with many
-  right-hand sides go to CHOLMOD in blocks of columns where ``cholmod_block`` reaches it. Used from
+  BLAS, through cvxopt's ``cholmod`` module, when its wheel is installed; where ``cholmod_block``
+  reaches CHOLMOD, the numeric factorisation runs without the GIL and solves with many right-hand
+  sides go to CHOLMOD in blocks of columns. Used from
   ``CHOLMOD_MIN`` rows: measured 1.7-2.7x faster than SuperLU from 8k to 100k triangles and 2.5-3x
   at 1M-2M (docs/scale.md), in about half of SuperLU's factor memory (one triangle instead of L and
   U).
@@ -86,22 +87,25 @@ def backend(size=None):
 
 def factor_all(*matrices, orders=None, defer_last=False):
     """``Factor`` of each matrix (with ``orders``: one fill-reducing order or None per matrix).
-    SuperLU releases the GIL, so its factorisations run on two threads from ``PARALLEL_MIN`` up to
-    ``PARALLEL_MAX`` rows in all (measured at 2.2k rows: no gain; 8.4k: 15 ms against 21 ms; above
-    the maximum, two factorisations' work space at once would lift the peak memory of a 1M-triangle
-    disk from 1.8 GB to 2.1 GB; docs/scale.md); CHOLMOD's binding holds the GIL (two threads measured
-    no faster), so its factorisations run in turn.
+    SuperLU releases the GIL, and so does CHOLMOD's numeric factorisation where ``cholmod_block``
+    reaches it (cvxopt's own ``numeric`` holds it: then CHOLMOD's factorisations run in turn). Such
+    factorisations run on two threads from ``PARALLEL_MIN`` up to ``PARALLEL_MAX`` rows in all
+    (SuperLU, measured at 2.2k rows: no gain; 8.4k: 15 ms against 21 ms; above the maximum, two
+    factorisations' work space at once would lift the peak memory of a 1M-triangle disk from 1.8 GB
+    to 2.1 GB; docs/scale.md).
 
-    ``defer_last``: when SuperLU factorisations run in turn on a machine with two or more cores, the
-    last one runs on its own thread and comes back as a ``FactorJob`` (``result()`` gives its Factor),
-    so the caller's work with the others (solves, numpy; both release the GIL) overlaps it: the
-    memory is that of factorisations in turn."""
+    ``defer_last``: above ``PARALLEL_MAX``, on a machine with two or more cores, the factorisations
+    run in turn and the last one on its own thread, coming back as a ``FactorJob`` (``result()``
+    gives its Factor), so the caller's work with the others (solves, numpy; both release the GIL)
+    overlaps it (CHOLMOD at 1M triangles: 6.1 -> 5.7 s in the add-on, docs/scale.md "Twentieth
+    round")."""
     orders = list(orders) if orders is not None else [None] * len(matrices)
     if len(orders) != len(matrices):
         raise ConformalError(f"{len(orders)} orders for {len(matrices)} matrices")
     methods = [backend(K.shape[0]) for K in matrices]
     rows = sum(K.shape[0] for K in matrices)
-    in_turn = WORKERS < 2 or len(matrices) < 2 or 'cholmod' in methods
+    free = all(m == 'superlu' or BlockSolver.load() is not None for m in methods)
+    in_turn = WORKERS < 2 or len(matrices) < 2 or not free
     if in_turn or not PARALLEL_MIN <= rows <= PARALLEL_MAX:
         if defer_last and not in_turn and rows > PARALLEL_MAX:
             done = [Factor(K, order=o) for K, o in zip(matrices[:-1], orders[:-1])]
@@ -258,17 +262,26 @@ class Factor:
     @staticmethod
     def _cholmod(K, order=None):
         """CHOLMOD's factor of ``K`` (its lower triangle, in ``order`` if given), or None if ``K`` is
-        not positive definite or the binding refuses the arrays (then SuperLU factors it)."""
-        C = sp.tril(K, format='coo')
+        not positive definite or the binding refuses the arrays (then SuperLU factors it). cvxopt
+        analyses the pattern; the numeric factorisation goes through ``cholmod_block`` where it
+        loads (the GIL free meanwhile), else through cvxopt's ``numeric``."""
+        C = sp.tril(K, format='csc')
         C.sum_duplicates()
+        C.sort_indices()
         n = K.shape[0]
+        block = BlockSolver.load()
         try:
+            cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(C.indptr))
             A = _cvx_spmatrix(_cvx_matrix(np.ascontiguousarray(C.data, np.float64)), _cvx_matrix(
-                C.row.astype(np.int64)), _cvx_matrix(C.col.astype(np.int64)), (n, n))
-            del C
+                C.indices.astype(np.int64)), _cvx_matrix(cols), (n, n))
+            del cols
             p = None if order is None else _cvx_matrix(np.asarray(order, np.int64))
             fac = _cholmod.symbolic(A) if p is None else _cholmod.symbolic(A, p=p)
-            _cholmod.numeric(A, fac)           # CHOLMOD prints nothing here: it raises
+            if block is not None:
+                del A
+                block.factorize(fac, C.indptr, C.indices, C.data)
+            else:
+                _cholmod.numeric(A, fac)       # CHOLMOD prints nothing here: it raises
             return fac
         except (ArithmeticError, ValueError, TypeError):    # not positive definite, or the arrays
             return None
