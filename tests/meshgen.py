@@ -223,3 +223,26 @@ def jagged_cap(level=5, jitter=0.02, seed=1):
     V, F = V[used], Fl.reshape(-1, 3)
     e = np.linalg.norm(V[F[:, 0]] - V[F[:, 1]], axis=1).mean()
     return V + rng.standard_normal(V.shape) * jitter * e, F
+
+
+def scan_patch(n=1500, seed=3):
+    """A scan-like open disk: ``n`` jittered points in the unit disk, denser (about 3x) around
+    (0.35, 0.35), Delaunay-triangulated and lifted by a smooth height field (a dome with a ridge and a
+    dimple) plus noise of 0.2 % of the size. The dense patch has small triangles where the map's grid
+    cell is coarse in surface units, so a source there takes the geodesic solver's refined seed while
+    one elsewhere does not. Returns V (k,3), F (m,3) counter-clockwise."""
+    from scipy.spatial import Delaunay
+    rng = np.random.default_rng(seed)
+    P = rng.uniform(-1, 1, (8 * n, 2))
+    P = P[(P ** 2).sum(1) < 0.95]
+    dens = 1 + 2 * np.exp(-((P - 0.35) ** 2).sum(1) / 0.03)
+    P = P[rng.uniform(size=len(P)) < dens / dens.max()][:n]
+    t = np.linspace(0, 2 * np.pi, int(4 * np.sqrt(n)), endpoint=False)
+    P = np.vstack([np.c_[np.cos(t), np.sin(t)], P])
+    x, y = P[:, 0], P[:, 1]
+    z = 0.6 * np.sqrt(np.maximum(1 - 0.8 * (x ** 2 + y ** 2), 0))
+    z += 0.25 * np.exp(-x ** 2 / 0.01 - (y + 0.05) ** 2 / 0.12) - 0.12 * np.exp(-((x + 0.35) ** 2 + (y - 0.3) ** 2) / 0.02)
+    V = np.c_[P, z + rng.normal(scale=0.002, size=len(P))]
+    F = Delaunay(P).simplices
+    A = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
+    return V, np.where((A < 0)[:, None], F[:, [0, 2, 1]], F)
