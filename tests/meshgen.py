@@ -241,7 +241,8 @@ def scan_patch(n=1500, seed=3):
     P = np.vstack([np.c_[np.cos(t), np.sin(t)], P])
     x, y = P[:, 0], P[:, 1]
     z = 0.6 * np.sqrt(np.maximum(1 - 0.8 * (x ** 2 + y ** 2), 0))
-    z += 0.25 * np.exp(-x ** 2 / 0.01 - (y + 0.05) ** 2 / 0.12) - 0.12 * np.exp(-((x + 0.35) ** 2 + (y - 0.3) ** 2) / 0.02)
+    z += 0.25 * np.exp(-x ** 2 / 0.01 - (y + 0.05) ** 2 / 0.12)
+    z -= 0.12 * np.exp(-((x + 0.35) ** 2 + (y - 0.3) ** 2) / 0.02)
     V = np.c_[P, z + rng.normal(scale=0.002, size=len(P))]
     F = Delaunay(P).simplices
     A = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
