@@ -14,7 +14,9 @@ disks or disk islands: closed meshes are cut along their OBJ ``vt`` seams when t
 and skipped otherwise (use sphere mode for those). Distances are then on the cut surface, and the
 exact reference is MMP on the same cut surface (its split vertices), restricted to the source's part.
 Head-like disks (stand-ins for the held-out scans): ``--meshes cow-cut spot-cut2 cheburashka-cut1``
-(``meshes.HEAD_CUTS``, then the given number of Loop subdivisions).
+(``meshes.HEAD_CUTS``, then the given number of Loop subdivisions). Scan-like meshes of our own
+(random points with a denser patch, Delaunay-triangulated and lifted, with noise): ``--meshes
+facescan faceholes deepcap`` (``meshes.scan_like``).
 
 Errors: relative to the exact distance, mean and max over the vertices of the source's part farther
 than ``EXCLUDE`` times the part's bounding-box diagonal from the source; a vertex split by a seam counts
@@ -93,6 +95,10 @@ def load(name):
         return V, F, None
     if name in SURF:
         V, F = make_surface(name, 65)
+        return V, F, None
+    from meshes import SCANS, scan_like
+    if name in SCANS:                       # scan-like meshes of our own (bench/meshes.py)
+        V, F = scan_like(name)
         return V, F, None
     if '-cut' in name:                      # head-like disks of bench/cones.py: 'cow-cut', 'spot-cut2', ...
         from meshes import HEAD_CUTS, cut_disk, loop_subdivide
