@@ -245,5 +245,6 @@ def scan_patch(n=1500, seed=3):
     z -= 0.12 * np.exp(-((x + 0.35) ** 2 + (y - 0.3) ** 2) / 0.02)
     V = np.c_[P, z + rng.normal(scale=0.002, size=len(P))]
     F = Delaunay(P).simplices
-    A = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
+    e1, e2 = P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]]
+    A = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]                  # the signed area (2D cross product)
     return V, np.where((A < 0)[:, None], F[:, [0, 2, 1]], F)
