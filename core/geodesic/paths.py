@@ -174,7 +174,7 @@ class SteinerGraph:
         to the nearest) and/or surface points: one point ``X`` (3,) in the triangles ``src_faces`` (its
         star), or points ``X`` (p,3) each in its triangle ``src_faces`` (p,)."""
         from scipy.sparse.csgraph import dijkstra
-        N, rank = self.N, self.rank
+        rank = self.rank
         sv = None if src is None else np.unique(np.atleast_1d(src)).astype(np.int64)
         if X is None or src_faces is None:                    # vertex sources only (X ignored)
             return dijkstra(self.G, directed=True, indices=rank[sv], min_only=True)[rank]
@@ -189,8 +189,17 @@ class SteinerGraph:
             wx = np.linalg.norm(self.P[cand] - X[owner], axis=1)
         if sv is not None:
             cand, wx = np.r_[cand, sv], np.r_[wx, np.zeros(len(sv))]
-        wx = np.maximum(wx, 1e-300)
-        cand = rank[cand]
+        return self.search_from(cand, wx)
+
+    def search_from(self, points, lengths):
+        """(N,) shortest path lengths from a virtual source joined to the graph points ``points`` (p,)
+        (indices into ``P``) by links of ``lengths`` (p,) (mesh units, >= 0): the smallest over the
+        points of its length plus the path from it (a source at several points, or times given at
+        them)."""
+        from scipy.sparse.csgraph import dijkstra
+        N, rank = self.N, self.rank
+        wx = np.maximum(np.asarray(lengths, np.float64), 1e-300)   # csgraph drops zero lengths
+        cand = rank[np.asarray(points, np.int64)]
         G = self.G
         if len(cand) <= self.SPARE:
             # rewrite the virtual source's row in place; its unused slots stay self-links
