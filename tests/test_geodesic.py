@@ -323,8 +323,7 @@ def test_a_spot_the_grid_resolves_poorly_takes_the_mesh_paths_around_it():
     defect, and the grid there is coarser than the triangles (cell / edge up to 1.2). From a source
     0.12 away the march came late at two vertices of that spot: +4.35 % against exact MMP. Its
     vertices now take the shortest paths through Steiner points over two rings of triangles, from the
-    grid times in the outer ring, where those are shorter (0.65 % max against MMP). Here against
-    surface paths at k = 15."""
+    grid around them (0.65 % max against MMP). Here against surface paths at k = 15."""
     from core.surfaces import scan_like
     V, F = scan_like('facescan')
     solver = geo.GeodesicSolver(V, F)

@@ -246,8 +246,10 @@ class SpotWindow:
     paths through ``SPOT_STEINER`` points per edge within the triangles of ``SPOT_RINGS`` rings
     (``SteinerGraph``), started from the grid times of the nodes inside the outermost ring (each node
     joined by straight segments to the points on its triangle's boundary; it lies in that flat
-    triangle) and from the sources inside the window. Every path from outside to an inner vertex
-    crosses that ring, so the window's values are those of the grid there plus the mesh's own paths.
+    triangle), from the sampled times of the ring's outer vertices (near a coarse spot the ring's
+    triangles hold few nodes) and from the sources inside the window. Every path from outside to an
+    inner vertex crosses that ring, so the window's values are those of the grid there plus the mesh's
+    own paths, early or late.
 
     ``ch`` a ``Chart`` (its grid rasterised). ``active`` False when the chart has no spot, or the window
     would exceed ``SPOT_MAX_FACES`` triangles."""
@@ -293,18 +295,26 @@ class SpotWindow:
         self.cand, owner = self.graph.boundary(np.searchsorted(self.faces, f))
         self.link = np.linalg.norm(self.graph.P[self.cand] - X[owner], axis=1)
         self.node_of_link = nodes[owner]
+        # and the vertices of the outermost ring that no inner-ring triangle holds (their sampled times)
+        mid = np.zeros(n, bool)
+        mid[F[_grow(F, spot, SPOT_RINGS - 1, n)].ravel()] = True
+        ring = np.zeros(n, bool)
+        ring[F[outer].ravel()] = True
+        self.ring = np.flatnonzero(ring & ~mid)
+        self.ring_local = np.searchsorted(self.used, self.ring)
 
     def repair(self, T, dist, keep, loc, X_pts, pt_faces):
-        """Lower ``dist`` (k,) at the inner vertices (not where ``keep`` (k,) is True) to the window's
-        shortest paths where they are shorter: from the grid times ``T`` (ny, nx) and from the sources
-        inside the window, local vertices ``loc`` (a,) and surface points ``X_pts`` (b,3) in local faces
-        ``pt_faces`` (b,). Each such path is a path on the surface after a grid time, so it only corrects
-        a march that came late; near a spot the outermost ring's triangles hold few nodes, and a path
-        through the nearest of them can be longer than the geodesic (measured +0.85 % where the grid
-        was right). Returns the number of vertices lowered."""
+        """Set ``dist`` (k,) at the inner vertices (not where ``keep`` (k,) is True) to the window's
+        shortest paths from the grid times ``T`` (ny, nx) of the outermost ring's nodes, from the
+        sampled times ``dist`` of its outer vertices, and from the sources inside the window: local
+        vertices ``loc`` (a,) and surface points ``X_pts`` (b,3) in local faces ``pt_faces`` (b,).
+        Returns the number of vertices set."""
         t = T.ravel()[self.node_of_link]
         ok = np.isfinite(t)
         cand, w = self.cand[ok], t[ok] + self.link[ok]
+        tv = dist[self.ring]
+        okv = np.isfinite(tv)
+        cand, w = np.r_[cand, self.ring_local[okv]], np.r_[w, tv[okv]]
         at = np.searchsorted(self.used, loc)
         mine = (at < len(self.used)) & (self.used[np.minimum(at, len(self.used) - 1)] == loc)
         cand, w = np.r_[cand, at[mine]], np.r_[w, np.zeros(int(mine.sum()))]
@@ -318,7 +328,7 @@ class SpotWindow:
         if not len(cand):
             return 0
         d = self.graph.search_from(cand, w)[self.inner_local]
-        sel = (d < dist[self.inner]) & ~keep[self.inner]
+        sel = np.isfinite(d) & ~keep[self.inner]
         dist[self.inner[sel]] = d[sel]
         return int(sel.sum())
 
