@@ -269,13 +269,9 @@ class SpotWindow:
         if not self.active:
             return
         outer = win & ~_grow(F, spot, SPOT_RINGS - 1, n)
-        if ch.free is not None:                      # under-resolved vertices: MeshRelax's
-            free = ch.free
-        else:
-            free = np.zeros(n, bool)
         inner = np.zeros(n, bool)
         inner[F[_grow(F, spot, 1, n)].ravel()] = True
-        self.inner = np.flatnonzero(inner & ~free)
+        self.inner = np.flatnonzero(inner)
         self.faces = np.flatnonzero(win)
         self.used, Fl = np.unique(F[self.faces], return_inverse=True)
         self.graph = SteinerGraph(ch.V[self.used], Fl.reshape(-1, 3), SPOT_STEINER)
@@ -1863,9 +1859,6 @@ class GeodesicSolver:
                 continue
             refined += nf
             if ch.free is not None:
-                d = np.where(np.isnan(d) & ~ch.free, np.inf, d)
-                d[ch.free] = np.inf
-                ch.relax.relax(d, ch.free)
                 hybrid += int(ch.free.sum())
             dist_s[ch.verts] = d
             marches += nm
@@ -1969,12 +1962,16 @@ class GeodesicSolver:
         used = None
         fine = (self._fine_seed(ch, S_uv, loc, src_faces, tree, X_src, upper, source_radius, calibrate)
                 if refine else [None] * len(S))
-        # a group marches from refined seeds only or from plain seeds only: a source that needs the
-        # refined seed keeps it when other sources of its mu are plain (a scan's multi-source set:
-        # 11.5 % max error before; docs/geodesic.md "Mixed groups")
-        groups = [part for idx in _groups(mu_s)
-                  for part in (idx[[fine[i] is not None for i in idx]], idx[[fine[i] is None for i in idx]])
-                  if len(part)]
+        # a source with a refined seed marches alone, the plain ones of similar mu together: a source
+        # that needs the refined seed keeps it beside plain sources (a scan's multi-source set: 11.5 %
+        # max error before), and refined seeds marched as one group came out up to 6.6 % long
+        # (docs/geodesic.md "Mixed groups")
+        groups = []
+        for idx in _groups(mu_s):
+            groups += [np.array([i]) for i in idx if fine[i] is not None]
+            plain = idx[[fine[i] is None for i in idx]]
+            if len(plain):
+                groups.append(plain)
         n_fine, fine_marches, n_marches = 0, 0, 0
         for idx in groups:
             reach = radius * float(mu_s[idx].max() / mu_s[idx].min())
@@ -2059,6 +2056,10 @@ class GeodesicSolver:
         sample = valid & ~ch.gap               # nodes that face a gap are no sample of either side
         dist = bilinear(np.where(sample, T, np.nan), ch.P, sample, ch.corner_ok)
         dist = np.where(np.isfinite(fixed), fixed, np.fmin(dist, near))
+        if ch.free is not None:                     # under-resolved triangles: on-mesh fast marching
+            dist = np.where(np.isnan(dist) & ~ch.free, np.inf, dist)
+            dist[ch.free] = np.inf
+            ch.relax.relax(dist, ch.free)
         spots = getattr(ch, 'spots', None)
         if spots is None:
             spots = ch.spots = SpotWindow(ch)
