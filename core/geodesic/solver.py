@@ -98,12 +98,12 @@ FINE_EDGES = 16.0     # the window reaches at least this many mean 3D edges of t
 # edge, or whose metric anisotropy exceeds SPOT_ANISO. The vertices of their triangles and of the
 # triangles next to them take shortest paths through SPOT_STEINER points per edge over the triangles
 # within SPOT_RINGS rings, from the grid times of the nodes in the outermost ring (and from the sources
-# inside); a window of more than SPOT_MAX_FACES triangles is left as it is.
-SPOT_CELL = 1.0
+# inside); when the window would hold more than SPOT_MAX_FACES triangles, only the worst spots.
+SPOT_CELL = 0.5
 SPOT_ANISO = 2.0
 SPOT_RINGS = 2
 SPOT_STEINER = 15
-SPOT_MAX_FACES = 4000
+SPOT_MAX_FACES = 2000
 
 
 # --------------------------------------------------------------------------------------------------
@@ -251,23 +251,36 @@ class SpotWindow:
     inner vertex crosses that ring, so the window's values are those of the grid there plus the mesh's
     own paths, early or late.
 
-    ``ch`` a ``Chart`` (its grid rasterised). ``active`` False when the chart has no spot, or the window
-    would exceed ``SPOT_MAX_FACES`` triangles."""
+    Where the window would hold more than ``SPOT_MAX_FACES`` triangles, it is built round the worst
+    spots only (a severity threshold, the larger of cell / ``SPOT_CELL`` and anisotropy /
+    ``SPOT_ANISO``, found by bisection). ``ch`` a ``Chart`` (its grid rasterised). ``active`` False
+    when the chart has no spot."""
 
     def __init__(self, ch):
         G = ch.grid
         F, n = ch.F, len(ch.V)
-        cell = G.h / ch.mu_face / mean_edges(ch.V, F)
-        spot = cell > SPOT_CELL
+        severity = G.h / ch.mu_face / mean_edges(ch.V, F) / SPOT_CELL
         if ch.ginv is not None:
-            spot |= metric_anisotropy(ch.ginv) > SPOT_ANISO
+            severity = np.maximum(severity, metric_anisotropy(ch.ginv) / SPOT_ANISO)
+        spot = severity > 1.0
         self.active = bool(spot.any())
         if not self.active:
             return
         win = _grow(F, spot, SPOT_RINGS, n)
-        self.active = bool(win.sum() <= SPOT_MAX_FACES)
-        if not self.active:
-            return
+        if win.sum() > SPOT_MAX_FACES:
+            # too many: the worst spots, by a severity threshold found by bisection (in log)
+            lo, hi = 0.0, float(np.log(severity.max()))
+            for _ in range(12):
+                mid = 0.5 * (lo + hi)
+                if _grow(F, severity > np.exp(mid), SPOT_RINGS, n).sum() > SPOT_MAX_FACES:
+                    lo = mid
+                else:
+                    hi = mid
+            spot = severity > np.exp(hi)
+            win = _grow(F, spot, SPOT_RINGS, n)
+            self.active = bool(spot.any())
+            if not self.active:
+                return
         outer = win & ~_grow(F, spot, SPOT_RINGS - 1, n)
         inner = np.zeros(n, bool)
         inner[F[_grow(F, spot, 1, n)].ravel()] = True
