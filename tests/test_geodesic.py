@@ -711,11 +711,13 @@ def test_solver_answers_a_second_source_without_reflattening(monkeypatch):
 
 # ------------------------------------------------------------------------------------------------
 # exact bounds, error against grid size, error estimate and warnings (issue #14)
-def test_clamps_between_euclidean_and_edge_paths():
+def test_clamps_between_euclidean_and_edge_paths(monkeypatch):
     """Coarse grids overshoot the edge paths (and, without the refined seed, undershoot the 3D
     distance); the clamps must remove both, and the unclamped run must show that there was something
-    to remove."""
+    to remove. (The spot windows, which mend most of that on so coarse a grid, are off here.)"""
     from scipy.sparse.csgraph import dijkstra
+    monkeypatch.setattr(geo, 'SPOT_CELL', np.inf)
+    monkeypatch.setattr(geo, 'SPOT_ANISO', np.inf)
     V, F = make_surface('edgebump', 33)
     gs = geo.GeodesicSolver(V, F, boundary='area', grid=64)
     below = above = clamped = 0
