@@ -294,11 +294,14 @@ class SpotWindow:
         face = np.where(G.inside & ch.march_on, G.face, -1).ravel()
         nodes = np.flatnonzero(face >= 0)
         nodes = nodes[outer[face[nodes]]]
+        W = ch.uv[F[face[nodes]]]
+        A = np.stack([W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]], axis=2)
+        det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
+        flat = np.abs(det) > 1e-12 * np.einsum('kij,kij->k', A, A)        # no node of a UV needle
+        nodes, W, A = nodes[flat], W[flat], A[flat]
         f = face[nodes]
         ny, nx = G.shape
         q = G.origin + np.c_[nodes % nx, nodes // nx] * G.h
-        W = ch.uv[F[f]]
-        A = np.stack([W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]], axis=2)
         b = np.linalg.solve(A, (q - W[:, 0])[:, :, None])[:, :, 0]
         X = ch.V[F[f, 0]] * (1 - b.sum(1))[:, None] + ch.V[F[f, 1]] * b[:, :1] + ch.V[F[f, 2]] * b[:, 1:]
         self.cand, owner = self.graph.boundary(np.searchsorted(self.faces, f))
