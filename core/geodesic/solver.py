@@ -226,6 +226,15 @@ def _directional_mu(T, valid, face, ginv, s, strict=False):
 
 # --------------------------------------------------------------------------------------------------
 # spots the grid resolves poorly: shortest paths on the mesh from the grid around them
+def surface_points(V, F, uv, faces, pts):
+    """3D points (k,3) of the UV points ``pts`` (k,2), each in its triangle ``faces`` (k,) of the map
+    ``uv`` (n,2) of the mesh ``V`` (n,3), ``F`` (m,3): the same barycentric coordinates in 3D."""
+    W = uv[F[faces]]
+    A = np.stack([W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]], axis=2)
+    b = np.linalg.solve(A, (pts - W[:, 0])[:, :, None])[:, :, 0]
+    return V[F[faces, 0]] * (1 - b.sum(1))[:, None] + V[F[faces, 1]] * b[:, :1] + V[F[faces, 2]] * b[:, 1:]
+
+
 def _grow(F, faces, rings, n):
     """(m,) bool: the triangles ``faces`` (bool (m,)) of ``F`` (m,3) and those within ``rings`` rings
     (sharing a vertex) of them; ``n`` the vertex count."""
@@ -297,13 +306,10 @@ class SpotWindow:
         W = ch.uv[F[face[nodes]]]
         A = np.stack([W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]], axis=2)
         det = A[:, 0, 0] * A[:, 1, 1] - A[:, 0, 1] * A[:, 1, 0]
-        flat = np.abs(det) > 1e-12 * np.einsum('kij,kij->k', A, A)        # no node of a UV needle
-        nodes, W, A = nodes[flat], W[flat], A[flat]
+        nodes = nodes[np.abs(det) > 1e-12 * np.einsum('kij,kij->k', A, A)]      # no node of a UV needle
         f = face[nodes]
         ny, nx = G.shape
-        q = G.origin + np.c_[nodes % nx, nodes // nx] * G.h
-        b = np.linalg.solve(A, (q - W[:, 0])[:, :, None])[:, :, 0]
-        X = ch.V[F[f, 0]] * (1 - b.sum(1))[:, None] + ch.V[F[f, 1]] * b[:, :1] + ch.V[F[f, 2]] * b[:, 1:]
+        X = surface_points(ch.V, F, ch.uv, f, G.origin + np.c_[nodes % nx, nodes // nx] * G.h)
         self.cand, owner = self.graph.boundary(np.searchsorted(self.faces, f))
         self.link = np.linalg.norm(self.graph.P[self.cand] - X[owner], axis=1)
         self.node_of_link = nodes[owner]
@@ -2090,13 +2096,7 @@ class GeodesicSolver:
             spots = ch.spots = SpotWindow(ch)
         if spots.active:
             pf = np.asarray(src_faces, np.int64)
-            X_pts = np.zeros((0, 3))
-            if len(pf):                             # the surface points' 3D positions (barycentric in UV)
-                W = ch.uv[ch.F[pf]]
-                A = np.stack([W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]], axis=2)
-                b = np.linalg.solve(A, (S_uv[len(loc):] - W[:, 0])[:, :, None])[:, :, 0]
-                X_pts = ch.V[ch.F[pf, 0]] * (1 - b.sum(1))[:, None] + ch.V[ch.F[pf, 1]] * b[:, :1] + \
-                    ch.V[ch.F[pf, 2]] * b[:, 1:]
+            X_pts = surface_points(ch.V, ch.F, ch.uv, pf, S_uv[len(loc):]) if len(pf) else np.zeros((0, 3))
             seeded = np.isfinite(fixed) | np.isfinite(near)      # a seed's own values stay
             spots.repair(T, dist, seeded, np.asarray(loc, np.int64), X_pts, pf)
         return dist, radius, n_marches + fine_marches, T, n_fine
@@ -2141,10 +2141,7 @@ class GeodesicSolver:
             else:
                 f = int(src_faces[i - len(loc)])
                 star = np.array([f])
-                W = ch.uv[ch.F[f]]
-                A = np.c_[W[1] - W[0], W[2] - W[0]]
-                b = np.linalg.solve(A, S_uv[i] - W[0])
-                Xs = ch.V[ch.F[f, 0]] * (1 - b.sum()) + ch.V[ch.F[f, 1]] * b[0] + ch.V[ch.F[f, 2]] * b[1]
+                Xs = surface_points(ch.V, ch.F, ch.uv, star, S_uv[i][None])[0]
             if not len(star):
                 continue
             mu_min = float(ch.mu_face[star].min())
