@@ -290,7 +290,8 @@ class SpotWindow:
             self.active = bool(spot.any())
             if not self.active:
                 return
-        outer = win & ~_grow(F, spot, SPOT_RINGS - 1, n)
+        within = _grow(F, spot, SPOT_RINGS - 1, n)  # all but the outermost ring
+        outer = win & ~within
         inner = np.zeros(n, bool)
         inner[F[_grow(F, spot, 1, n)].ravel()] = True
         self.inner = np.flatnonzero(inner)
@@ -315,7 +316,7 @@ class SpotWindow:
         self.node_of_link = nodes[owner]
         # and the vertices of the outermost ring that no inner-ring triangle holds (their sampled times)
         mid = np.zeros(n, bool)
-        mid[F[_grow(F, spot, SPOT_RINGS - 1, n)].ravel()] = True
+        mid[F[within].ravel()] = True
         ring = np.zeros(n, bool)
         ring[F[outer].ravel()] = True
         self.ring = np.flatnonzero(ring & ~mid)
