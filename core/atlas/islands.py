@@ -34,7 +34,7 @@ from ..mesh.measures import (determinants, flip_warning, jacobians, signed_uv_ar
                              uv_measures)
 from ..mesh import topology
 from ..mesh.repair import repair, zero_area_note
-from ..disk.flatten import MU_WARN, QC_WARN
+from ..disk.flatten import QC_WARN, scale_variation
 from .charts import split_overlaps
 from .repeats import Repeats
 from .cut import Cut, _seam_halfedges, boundary_crossings, cut_along_seams, seam_pairs, shelf_pack  # noqa: F401
@@ -257,9 +257,8 @@ def _island_warnings(rep):
         w.append(f"the island overlaps itself ({rep['overlaps']} boundary crossings)")
     if not (np.isfinite(rep.get('mu_ratio', np.nan)) and rep.get('mu_ratio', 0) > 0):
         w.append("the conformal factor is not finite and positive")
-    elif rep['mu_ratio'] < MU_WARN:
-        w.append(f"extreme scale variation: mu_ratio {rep['mu_ratio']:.2g} (texel density varies more "
-                 f"than {1 / MU_WARN:.0e}-fold); mark seams to cut long or closed parts apart")
+    elif scale_variation(rep['mu_ratio']):
+        w.append(scale_variation(rep['mu_ratio']) + "; mark seams to cut long or closed parts apart")
     return list(dict.fromkeys(w))
 
 

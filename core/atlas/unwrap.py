@@ -34,7 +34,7 @@ import numpy as np
 
 from ..blas import one_thread
 from ..errors import ConformalError
-from ..disk.flatten import MU_WARN, QC_WARN, flatten
+from ..disk.flatten import QC_WARN, flatten, scale_variation
 from ..mesh import topology
 from ..mesh.geometry import face_areas
 from ..mesh.repair import repair, zero_area_note
@@ -154,10 +154,9 @@ def island_warnings(rep: dict, desc: str) -> list:
         out.append(f"{desc} is far from conformal (qc_mean {rep['qc_mean']:.3g} > {QC_WARN}): mesh too "
                    "coarse or too distorted for a good conformal map")
     mu = rep.get('mu_ratio')
-    if mu is not None and not mu >= MU_WARN:
-        out.append(f"{desc} has extreme scale variation: mu_ratio {mu:.2g} (texel density varies more "
-                   f"than {1 / MU_WARN:.0e}-fold); mark seams that cut long or closed parts apart, or let "
-                   "the tool choose cones and seams")
+    if mu is not None and scale_variation(mu):
+        out.append(f"{desc} has {scale_variation(mu)}; mark seams that cut long or closed parts apart, or "
+                   "let the tool choose cones and seams")
     if rep.get('converged') is False:
         out.append(f"{desc}: the optimiser did not converge; the map is the best one found")
     if rep.get('bound_note'):

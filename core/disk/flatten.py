@@ -278,6 +278,15 @@ def normalise_uv(F, uv, area, fit='true_scale'):
     return (uv - lo) / size + (1 - (hi - lo) / size) / 2
 
 
+def scale_variation(mu_ratio):
+    """The core of the warning for a ``mu_ratio`` below ``MU_WARN`` or NaN (str), or None at or above
+    it; each caller adds its remedy."""
+    if mu_ratio >= MU_WARN:
+        return None
+    return (f"extreme scale variation: mu_ratio {mu_ratio:.2g} (texel density varies more than "
+            f"{1 / MU_WARN:.0e}-fold)")
+
+
 def _warnings(report, qc_limit=QC_WARN):
     """The honest-report warnings (list of str) for a measured map's ``report``."""
     w = []
@@ -287,9 +296,8 @@ def _warnings(report, qc_limit=QC_WARN):
         w.append(f"poor conformality: qc_mean {report.get('qc_mean'):.3f} is above {qc_limit}")
     if not np.isfinite(report.get('mu_ratio', np.nan)) or not report.get('mu_ratio', 0) > 0:
         w.append("the conformal factor is not finite and positive on every triangle")
-    elif report['mu_ratio'] < MU_WARN:
-        w.append(f"extreme scale variation: mu_ratio {report['mu_ratio']:.2g} (texel density varies more "
-                 f"than {1 / MU_WARN:.0e}-fold); mark seams to cut long or closed parts apart")
+    elif scale_variation(report['mu_ratio']):
+        w.append(scale_variation(report['mu_ratio']) + "; mark seams to cut long or closed parts apart")
     return w
 
 
