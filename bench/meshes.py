@@ -72,9 +72,9 @@ def cut_disk(V, F, direction, height):
 
 
 def scan_like(name):
-    """The scan-like meshes of ``core.surfaces.scan_like`` ('facescan', 'faceholes', 'deepcap')."""
+    """The scan-like meshes of ``core.surfaces.scan_like`` (``SCANS``)."""
     from core.surfaces import scan_like as make
     return make(name)
 
 
-SCANS = ('facescan', 'faceholes', 'deepcap')
+SCANS = ('facescan', 'faceholes', 'deepcap', 'steepface')

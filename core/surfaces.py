@@ -145,7 +145,10 @@ def scan_like(name):
     random points with a denser patch, Delaunay-triangulated in the plane and lifted, with noise of
     0.2 % of the size. 'facescan' (5.4k vertices, 10.4k triangles): a face-like height field over an
     ellipse; 'faceholes': the same with the eye regions cut out (two holes); 'deepcap': a cap of
-    0.72 pi of a sphere (4.4k vertices, 8.6k triangles). Returns (V, F) or None for another name."""
+    0.72 pi of a sphere (4.4k vertices, 8.6k triangles); 'steepface': the face with three times the
+    relief over other random points (10.4k triangles), so that its flanks stand nearly vertical and the
+    plane's triangles become needles there, as on a range scan seen from the front. Returns (V, F) or
+    None for another name."""
     from scipy.spatial import Delaunay
     rng = np.random.default_rng(7)
     P = _ellipse_points(rng, 6000)
@@ -153,6 +156,11 @@ def scan_like(name):
     V = np.c_[P, _face_height(P) + rng.normal(scale=0.002, size=len(P))]
     if name == 'facescan':
         return V, F
+    if name == 'steepface':
+        rng = np.random.default_rng(3)
+        P = _ellipse_points(rng, 6000)
+        V = np.c_[P, 3 * _face_height(P) + rng.normal(scale=0.003, size=len(P))]
+        return V, _ccw(P, Delaunay(P).simplices)
     Q = _ellipse_points(rng, 5000, 1.0, 1.0)
     if name == 'deepcap':
         r, ph = np.linalg.norm(Q, axis=1), np.arctan2(Q[:, 1], Q[:, 0])

@@ -308,8 +308,9 @@ def test_geodesic_sphere_mode_on_scans_against_exact(name):
     """Issue #14's sphere-mode line: on spot (sphere map mu ratio 0.01) and cheburashka (3 folded
     triangles), against exact MMP (tests/data/geodesic_ref_<name>_closed.npz), excluding 2 % of the
     diagonal around the sources: mean below 0.1 % (the heat method's is 1.6-2.3 %), max below 2 %, for
-    each source and for the three together; the error estimate within a factor 2.5 of the measured
-    mean; and the same distances for any vertex order (a permutation of V and of F)."""
+    each source and for the three together; the error estimate cautious (at least the measured mean over
+    1.5, at most 4x it: the extrapolation's gain is 3-6x on these meshes, the estimate assumes 1.6);
+    and the same distances for any vertex order (a permutation of V and of F)."""
     from core.sphere.geodesic import sphere_geodesic
     V, F = _load(name)
     ref = np.load(os.path.join(DATA, f'geodesic_ref_{name}_closed.npz'))
@@ -318,13 +319,16 @@ def test_geodesic_sphere_mode_on_scans_against_exact(name):
     diag = np.linalg.norm(np.ptp(V, axis=0))
     sets = [[int(x)] for x in src] + [list(map(int, src))]
     refs = list(D) + [D.min(0)]
+    est = []
     for ss, Dk in zip(sets, refs):
         d, rep = sphere_geodesic(V, F, ss, S=S)
         far = np.min(np.linalg.norm(V[:, None] - V[ss][None], axis=2), axis=1) > 0.02 * diag
         e = np.abs(d[far] - Dk[far]) / Dk[far]
         assert rep['method'] == 'paths', rep['method']
         assert e.mean() < 1e-3 and e.max() < 0.02, (ss, e.mean(), e.max())
-        assert e.mean() / 2.5 < rep['error_estimate'] < 2.5 * e.mean(), (rep['error_estimate'], e.mean())
+        est.append((rep['error_estimate'], e.mean()))
+    for x, m in est:
+        assert m / 1.5 < x < 4.0 * m, est
     perm = np.random.default_rng(3).permutation(len(V))
     inv = np.argsort(perm)
     Fp = inv[F][np.random.default_rng(4).permutation(len(F))]

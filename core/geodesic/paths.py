@@ -62,9 +62,7 @@ def edge_grading(V, F, ue, inv, extra_max=GRADE_EXTRA, amin=None):
         return np.minimum(2.0 ** np.ceil(np.log2(want) - 1e-9), cap).astype(np.int64)
 
     def extra(mu):
-        mm = mu[inv]
-        return float((mm[:, 0] * mm[:, 1] + mm[:, 1] * mm[:, 2] + mm[:, 0] * mm[:, 2] - 3).sum()) \
-            / (3.0 * max(len(F), 1))
+        return grade_extra(mu, inv)
 
     cap = GRADE_MAX
     while cap >= 2:
@@ -76,6 +74,15 @@ def edge_grading(V, F, ue, inv, extra_max=GRADE_EXTRA, amin=None):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if extra(mult(mid, 2)) <= extra_max else (lo, mid)
     return mult(lo, 2)
+
+
+def grade_extra(mult, inv):
+    """The links a grading adds to a Steiner graph, as a fraction of the uniform graph's ``k^2`` terms:
+    per triangle ``m_a m_b + m_b m_c + m_a m_c - 3`` over 3 (``mult`` (e,) the edge multipliers,
+    ``inv`` (m,3) the edge of each side), averaged over the triangles."""
+    mm = mult[inv]
+    return float((mm[:, 0] * mm[:, 1] + mm[:, 1] * mm[:, 2] + mm[:, 0] * mm[:, 2] - 3).sum()) \
+        / (3.0 * max(len(inv), 1))
 
 
 class SteinerGraph:
@@ -247,16 +254,18 @@ class SurfacePaths:
         edges = mesh_edges(F)
         grade = None
         self.short = (0.0, 0)
+        self.grade_need = 0.0
         if graded:
             ue, inv = edges
             V = np.asarray(V, np.float64)
-            base = path_links(len(F), len(ue), k) + path_links(len(F), len(ue), (k - 1) // 2)
-            room = min(GRADE_EXTRA_MAX, max(GRADE_EXTRA, 0.9 * PATH_BUDGET / base - 1.0))
+            room = grading_room(len(F), len(ue), k)
             amin = edge_corner_angles(V, F, inv, len(ue))
             grade = edge_grading(V, F, ue, inv, room, amin)
             # the thin triangles the budget left short of their points: the paths' excess there is
             # not what the extrapolation and its estimate assume (``thin_warning``)
-            short = (grade[inv] < edge_grading(V, F, ue, inv, np.inf, amin)[inv]).any(1)
+            full = edge_grading(V, F, ue, inv, np.inf, amin)
+            self.grade_need = grade_extra(full, inv)      # what the full grading adds (``surface_paths``)
+            short = (grade[inv] < full[inv]).any(1)
             if short.any():
                 from ..mesh.geometry import face_areas
                 A = face_areas(V, F)
@@ -334,14 +343,17 @@ def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapo
     return dv, dS, graph.P, graph.own
 
 
-# The extrapolated distances' mean error measured 3.3-4.5x below the plain k-point paths' excess (the
-# Richardson correction) on spot and cheburashka at k = 9 (three sources each), 4.9x on spot at k = 15
-# (k = 3 still gives 0.37-0.42 % mean there, against the heat method's 1.6-1.8 %):
-# ``surface_paths`` divides the excess by this to estimate the error it returns (slightly cautious).
+# ``surface_paths`` divides the plain k-point paths' mean excess (the Richardson correction) by this to
+# estimate the mean error of the extrapolated distances. Measured at k = 9 against exact MMP, four
+# random sources per mesh (docs/geodesic.md, "Twenty-first round"): 3.1-5.6x on spot, cheburashka and
+# bump (regular meshes), but 1.6-3.1x on scan-like meshes (random points, Delaunay-triangulated and
+# lifted: facescan, faceholes, deepcap and four more of that kind), 1.8-2.4x on the cow's head cut and
+# 1.2-2.5x on suzanne. It was 2.5, from spot and cheburashka alone: on the scans the estimate was then
+# up to 1.5x below the error, and paths at 0.10-0.14 % mean came back with no refinement and no warning.
 # Not at k = 3: its coarse graph has one point per edge, too few for the extrapolation to gain (the
-# extrapolated error equals the excess there: 0.94-0.96x on spot and cheburashka, three sources each,
-# where k = 5 to 13 gain 2.7-3.3x); ``extrapolation_gain`` says which applies.
-EXTRAPOLATION_GAIN = 2.5
+# extrapolated error equals the excess there: 0.94-0.96x on spot and cheburashka, three sources each);
+# ``extrapolation_gain`` says which applies.
+EXTRAPOLATION_GAIN = 1.6
 PATH_K = (9, 7, 5, 3)       # Steiner points per edge that ``surface_paths`` tries, best first (odd)
 PATH_K_MAX = 31            # the most Steiner points per edge ``surface_paths`` refines to for its target
 PATH_BUDGET = 12_000_000  # graph links (point pairs, both graphs) ``surface_paths`` may build; ~1 GB peak
@@ -378,6 +390,47 @@ def path_points(n_faces, n_edges, budget=None, k_min=PATH_K[-1], k_max=PATH_K[0]
     return None
 
 
+def grading_room(n_faces, n_edges, k):
+    """The links ``edge_grading`` may add to the pair of graphs at ``k`` points per edge (a fraction of
+    their ``k^2`` terms, as ``grade_extra`` counts them): ``GRADE_EXTRA``, or up to ``GRADE_EXTRA_MAX``
+    what 0.9 of ``PATH_BUDGET`` leaves over the uniform graphs."""
+    base = path_links(n_faces, n_edges, k) + path_links(n_faces, n_edges, (k - 1) // 2)
+    return min(GRADE_EXTRA_MAX, max(GRADE_EXTRA, 0.9 * PATH_BUDGET / base - 1.0))
+
+
+def graded_k(V, F, k, cache=None):
+    """The Steiner points per edge to build for a requested ``k`` (odd) on the triangles ``F`` (m,3)
+    (vertices ``V`` (n,3)): ``k``; or, where its graphs would leave thin triangles over ``SHORT_AREA``
+    of the area short of their graded points (``edge_grading`` within ``grading_room``), the largest
+    odd ``k' < k`` (at least ``PATH_K[-1]``) at which every thin triangle gets them, if there is one.
+    Measured on scans whose flanks stand nearly vertical (needles over a third of the area, 10k
+    triangles, against exact MMP): fully graded at k = 11, mean 0.069-0.086 % and max 1.1-1.6 %; short
+    of the grading at k = 13 and 15, 0.065-0.11 % and 4.0-4.5 %. ``cache``: a dict kept between calls
+    (the answer per ``k``)."""
+    cache = {} if cache is None else cache
+    got = cache.setdefault('graded_k', {})
+    if k in got:
+        return got[k]
+    F = np.asarray(F, np.int64)
+    ue, inv = mesh_edges(F)
+    amin = edge_corner_angles(V, F, inv, len(ue))
+    full = edge_grading(V, F, ue, inv, np.inf, amin)
+    need = grade_extra(full, inv)
+    out = k
+    if need > grading_room(len(F), len(ue), k):
+        fit = next((j for j in range(k - 2, PATH_K[-1] - 1, -2) if grading_room(len(F), len(ue), j) >= need),
+                   None)
+        if fit is not None:
+            from ..mesh.geometry import face_areas
+            short = (edge_grading(V, F, ue, inv, grading_room(len(F), len(ue), k), amin)[inv]
+                     < full[inv]).any(1)
+            A = face_areas(V, F)
+            if A[short].sum() >= SHORT_AREA * A.sum():
+                out = fit
+    got[k] = out
+    return out
+
+
 def thin_warning(short, where=""):
     """The warning (str) for surface paths whose thin triangles the budget left short of their graded
     points (``short``: (area fraction, count), ``SurfacePaths.short``), or None under ``SHORT_AREA``
@@ -392,7 +445,8 @@ def thin_warning(short, where=""):
             "percent near them); remesh those triangles into better shapes")
 
 
-def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_K_MAX, cache=None):
+def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_K_MAX, cache=None,
+                  fit_grading=True):
     """Geodesic distances on the whole surface of ``F`` (m,3) (vertices ``V`` (n,3), mesh units) to the
     nearest of the source vertices ``sources`` (s,) and the surface points ``X`` (p,3) in the
     triangles ``faces`` (p,): shortest paths through ``k`` (odd) Steiner points per edge,
@@ -400,9 +454,12 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
     estimate exceeds, or where the plain paths' relative excess at a vertex beyond two mean edges of
     the sources exceeds ``PATH_WORST`` (a bound on the worst error), once more with the ``k`` (odd, at
     most ``k_max``, within ``PATH_BUDGET``) that the excess's fall as ``k^-STEINER_ORDER`` predicts for
-    0.8 of the target (and of ``PATH_WORST``). ``cache``: a dict kept by the caller between searches
-    of the same ``V``, ``F``: it keeps the graphs of every ``k`` used (built once, then each search
-    is two Dijkstra runs), the mean edge and the edge count, and ``short`` of the graph last used
+    0.8 of the target (and of ``PATH_WORST``); the refined answer is kept only if its estimate is
+    not above the first one's. ``fit_grading``: start from ``graded_k(k)`` instead of ``k``, and refine
+    a fully graded graph only as far as its full grading fits (off: ``k`` as given). ``cache``: a dict
+    kept by the caller between searches of the same ``V``, ``F``: it keeps the graphs of every ``k``
+    used (built once, then each search is two Dijkstra runs), the mean edge and the edge count, the
+    ``graded_k`` answers, and ``short`` of the graph last used
     (``SurfacePaths.short``, for ``thin_warning``). Returns ``(dist (n,) float64, inf
     off F and where no path reaches; estimate; k used)``: ``estimate`` is the mean relative excess of
     the plain ``k``-point paths over the vertices beyond one mean edge of the sources (the correction
@@ -419,23 +476,39 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
         cache['edge'] = float(np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean())
     edge = cache['edge']
     graphs = cache.setdefault('graphs', {})
+    if fit_grading:
+        k = graded_k(V, F, k, cache)
+    first = None
     while True:
         pair = graphs.get(k)
         if pair is None:
             pair = graphs[k] = SurfacePaths(V, F, k, graded=True)
-        cache['short'] = pair.short
         dv, _, ev = pair.distances(src, X, faces)
         far = np.isfinite(dv) & (dv > edge)
         rel = ev[far] / (dv[far] + ev[far])
         estimate = float(np.mean(rel)) / extrapolation_gain(k) if far.any() else 0.0
         worst = float(rel[dv[far] > 2 * edge].max(initial=0.0))
+        if first is not None and first[1] < estimate:
+            # the refined graph did worse: its thin triangles got fewer graded points within the
+            # budget than the first graph's (a scan's steep rim of needles). Keep the first answer.
+            cache['short'] = graphs[first[2]].short
+            return first
+        cache['short'] = pair.short
         if target is None or (estimate <= target and worst <= PATH_WORST):
             return dv, estimate, k
         want = k * max(estimate / (0.8 * target), worst / (0.8 * PATH_WORST)) ** (1.0 / STEINER_ORDER)
         if 'n_edges' not in cache:
             from ..mesh.topology import unique_edges
             cache['n_edges'] = len(unique_edges(F)[0])
-        k_new = path_points(len(F), cache['n_edges'], k_min=k + 2, k_max=min(int(np.ceil(want)) | 1, k_max))
+        # a graph whose thin triangles all got their graded points stays so: more points per edge with
+        # fewer on the needles gave worse maxima (a scan's steep flank: 1.1 % at k = 11 fully graded,
+        # 4.2 % at k = 13 and 15 short of them)
+        budget = PATH_BUDGET
+        if fit_grading and pair.short[1] == 0 and pair.grade_need > GRADE_EXTRA:
+            budget = min(budget, int(0.9 * PATH_BUDGET / (1.0 + pair.grade_need)))
+        k_new = path_points(len(F), cache['n_edges'], budget=budget, k_min=k + 2,
+                            k_max=min(int(np.ceil(want)) | 1, k_max))
         if k_new is None:
             return dv, estimate, k
+        first = (dv, estimate, k)
         k, target = k_new, None

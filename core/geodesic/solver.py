@@ -1872,7 +1872,8 @@ class GeodesicSolver:
                 d, path_est[c], k_used = surface_paths(ch.V, ch.F, loc, k0, X=Xp,
                                                        faces=src_faces if mine.any() else None,
                                                        target=None if self.steiner_points else
-                                                       self.error_target, cache=ch.paths_cache)
+                                                       self.error_target, cache=ch.paths_cache,
+                                                       fit_grading=not self.steiner_points)
                 path_k.append(k_used)
                 thin.append(thin_warning(ch.paths_cache.get('short'),
                                          f" on island {c + 1} of {len(self.charts)}" if len(self.charts) > 1
