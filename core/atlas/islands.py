@@ -34,7 +34,7 @@ from ..mesh.measures import (determinants, flip_warning, jacobians, signed_uv_ar
                              uv_measures)
 from ..mesh import topology
 from ..mesh.repair import repair, zero_area_note
-from ..disk.flatten import QC_WARN, scale_variation
+from ..disk.flatten import QC_WARN, SCALE_REMEDY, scale_variation
 from .charts import split_overlaps
 from .repeats import Repeats
 from .cut import Cut, _seam_halfedges, boundary_crossings, cut_along_seams, seam_pairs, shelf_pack  # noqa: F401
@@ -258,7 +258,7 @@ def _island_warnings(rep):
     if not (np.isfinite(rep.get('mu_ratio', np.nan)) and rep.get('mu_ratio', 0) > 0):
         w.append("the conformal factor is not finite and positive")
     elif scale_variation(rep['mu_ratio']):
-        w.append(scale_variation(rep['mu_ratio']) + "; mark seams to cut long or closed parts apart")
+        w.append(f"{scale_variation(rep['mu_ratio'])}; {SCALE_REMEDY}")
     return list(dict.fromkeys(w))
 
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..blas import one_thread
 from ..errors import ConformalError
-from ..disk.flatten import QC_WARN, flatten, scale_variation
+from ..disk.flatten import QC_WARN, SCALE_REMEDY, flatten, scale_variation
 from ..mesh import topology
 from ..mesh.geometry import face_areas
 from ..mesh.repair import repair, zero_area_note
@@ -155,8 +155,7 @@ def island_warnings(rep: dict, desc: str) -> list:
                    "coarse or too distorted for a good conformal map")
     mu = rep.get('mu_ratio')
     if mu is not None and scale_variation(mu):
-        out.append(f"{desc} has {scale_variation(mu)}; mark seams that cut long or closed parts apart, or "
-                   "let the tool choose cones and seams")
+        out.append(f"{desc} has {scale_variation(mu)}; {SCALE_REMEDY}")
     if rep.get('converged') is False:
         out.append(f"{desc}: the optimiser did not converge; the map is the best one found")
     if rep.get('bound_note'):

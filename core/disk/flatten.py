@@ -278,9 +278,13 @@ def normalise_uv(F, uv, area, fit='true_scale'):
     return (uv - lo) / size + (1 - (hi - lo) / size) / 2
 
 
+# what to do about an extreme scale variation (the words every warning of it ends with)
+SCALE_REMEDY = "mark seams that cut long or closed parts apart, or let the tool choose cones and seams"
+
+
 def scale_variation(mu_ratio):
     """The core of the warning for a ``mu_ratio`` below ``MU_WARN`` or NaN (str), or None at or above
-    it; each caller adds its remedy."""
+    it; the warnings add ``SCALE_REMEDY``."""
     if mu_ratio >= MU_WARN:
         return None
     return (f"extreme scale variation: mu_ratio {mu_ratio:.2g} (texel density varies more than "
@@ -297,7 +301,7 @@ def _warnings(report, qc_limit=QC_WARN):
     if not np.isfinite(report.get('mu_ratio', np.nan)) or not report.get('mu_ratio', 0) > 0:
         w.append("the conformal factor is not finite and positive on every triangle")
     elif scale_variation(report['mu_ratio']):
-        w.append(scale_variation(report['mu_ratio']) + "; mark seams to cut long or closed parts apart")
+        w.append(f"{scale_variation(report['mu_ratio'])}; {SCALE_REMEDY}")
     return w
 
 
