@@ -13,7 +13,9 @@ where the exact answer is the Euclidean distance. ``geodesic_ref_<name>_closed.n
 the closed meshes ``tests/data/sphere_<name>.npz`` (vertices as float64 of the stored float32), for
 sphere mode's tests; ``geodesic_ref_suzanne_island.npz`` the largest island of tests/data/suzanne.obj
 cut along its seams, with its ``V`` and ``F``; ``geodesic_ref_scan_patch.npz`` the scan-like disk
-``tests/meshgen.scan_patch(1500, 3)``, with its ``V`` and ``F`` (``--closed`` writes these two too)."""
+``tests/meshgen.scan_patch(1500, 3)``, and ``geodesic_ref_lifted_hemisphere.npz`` the lifted hemisphere
+``tests/meshgen.steep_rim(2000, 1, 0.5, 1.0)``, each with its ``V`` and ``F`` (``--closed`` writes these
+too)."""
 import argparse
 import os
 import sys
@@ -45,6 +47,8 @@ CLOSED = (
 
 # scan_patch(1500, 3): three vertices where the Steiner paths' extrapolation gains least (1.9-2.1x)
 SCAN_SOURCES = (37, 1328, 1334)
+# steep_rim(2000, 1, 0.5, 1.0), a lifted hemisphere: three vertices of its rim (the seed's needles)
+HEMI_SOURCES = (90, 112, 149)
 
 
 def suzanne_island():
@@ -118,7 +122,7 @@ def main(argv=None):
           f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
     # a scan-like disk (random points, Delaunay-triangulated and lifted; tests/meshgen.py)
     sys.path.insert(0, os.path.join(ROOT, 'tests'))
-    from meshgen import scan_patch
+    from meshgen import scan_patch, steep_rim
     Vs, Fs = scan_patch(1500, 3)
     src = SCAN_SOURCES
     D = exact_distances(Vs, Fs, src)
@@ -126,6 +130,14 @@ def main(argv=None):
     np.savez_compressed(path, V=Vs.astype(np.float64), F=Fs.astype(np.int32),
                         sources=np.array(src, np.int32), dist=D)
     print(f"scan_patch(1500, 3) ({len(Fs)} triangles) sources {src} -> "
+          f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
+    # a lifted hemisphere (z = sqrt(1 - r^2) over random points: needles at its vertical rim)
+    Vh, Fh = steep_rim(2000, 1, 0.5, 1.0)
+    D = exact_distances(Vh, Fh, HEMI_SOURCES)
+    path = os.path.join(DATA, 'geodesic_ref_lifted_hemisphere.npz')
+    np.savez_compressed(path, V=Vh.astype(np.float64), F=Fh.astype(np.int32),
+                        sources=np.array(HEMI_SOURCES, np.int32), dist=D)
+    print(f"steep_rim(2000, 1, 0.5, 1.0) ({len(Fh)} triangles) sources {HEMI_SOURCES} -> "
           f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
     if args.closed:
         return 0

@@ -250,18 +250,19 @@ def scan_patch(n=1500, seed=3):
     return V, np.where((A < 0)[:, None], F[:, [0, 2, 1]], F)
 
 
-def steep_rim(n=3000, seed=1):
+def steep_rim(n=3000, seed=1, power=0.25, height=0.8):
     """A scan-like disk whose rim stands vertical: ``n`` random points in the unit disk (and a ring of
     ``4 sqrt(n)`` on its edge), Delaunay-triangulated in the plane and lifted to
-    ``z = 0.8 (1 - r^2)^(1/4)``. Near the rim the lift stretches the plane's triangles into needles
-    (corners down to a fraction of a degree). Returns V (k,3), F (m,3) counter-clockwise in the plane."""
+    ``z = height (1 - r^2)^power`` (``power`` 0.5, ``height`` 1: a hemisphere). Near the rim the lift
+    stretches the plane's triangles into needles (corners down to a fraction of a degree). Returns V
+    (k,3), F (m,3) counter-clockwise in the plane."""
     from scipy.spatial import Delaunay
     rng = np.random.default_rng(seed)
     P = rng.uniform(-1, 1, (3 * n, 2))
     P = P[(P ** 2).sum(1) < 0.97][:n]
     t = np.linspace(0, 2 * np.pi, int(4 * np.sqrt(n)), endpoint=False)
     P = np.vstack([np.c_[np.cos(t), np.sin(t)], P])
-    z = 0.8 * np.maximum(1 - (P ** 2).sum(1), 0) ** 0.25
+    z = height * np.maximum(1 - (P ** 2).sum(1), 0) ** power
     F = Delaunay(P).simplices
     e1, e2 = P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]]
     A = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]

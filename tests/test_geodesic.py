@@ -338,8 +338,8 @@ def test_a_spot_the_grid_resolves_poorly_takes_the_mesh_paths_around_it():
 
 
 def test_refined_seeds_march_one_by_one_and_slivers_take_the_mesh_paths():
-    """On a scan-like deep cap (``core.surfaces.scan_like('deepcap')``), three of five sources take the
-    refined seed. Marched as one group they came out up to 6.6 % long near one of them (against 1.2 %
+    """On a scan-like deep cap (``core.surfaces.scan_like('deepcap')``), three or more of five sources
+    take the refined seed. Marched as one group they came out up to 6.6 % long near one of them (against 1.2 %
     for the smallest of the five single-source runs); each now marches alone. And a sliver (cell /
     edge 2.3, anisotropy 4.7) left its three vertices to on-mesh fast marching, +15 % late from a
     source 0.13 away; the spot window around it now gives them the mesh's own paths (0.3 %)."""
@@ -348,13 +348,14 @@ def test_refined_seeds_march_one_by_one_and_slivers_take_the_mesh_paths():
     solver = geo.GeodesicSolver(V, F)
     src = [1227, 1694, 2524, 1805, 238]
     singles = [solver.distance([s]) for s in src]
-    assert sum(r['refined_sources'] for _, r in singles) == 3
+    refined = sum(r['refined_sources'] for _, r in singles)
+    assert refined >= 3                     # 3 at FINE_ANISO 1.15, 4 at 1.1
     d, rep = solver.distance(src)
     both = np.minimum.reduce([x for x, _ in singles])
     diag = np.linalg.norm(np.ptp(V, axis=0))
     far = np.min(np.linalg.norm(V[:, None] - V[src][None], axis=2), axis=1) > 0.02 * diag
     apart = np.abs(d - both)[far] / both[far]
-    assert rep['refined_sources'] == 3 and apart.max() < 0.01, apart.max()
+    assert rep['refined_sources'] == refined and apart.max() < 0.01, apart.max()
     d, _ = solver.distance([1246])
     ref, _ = geo.GeodesicSolver(V, F, method='paths', steiner_points=15).distance([1246])
     sliver = [2539, 1306, 3905]
@@ -988,6 +989,25 @@ def path_links_fit(paths, F, k, need):
     ne = len(unique_edges(F)[0])
     base = paths.path_links(len(F), ne, k) + paths.path_links(len(F), ne, (k - 1) // 2)
     return base * (1 + need) <= 0.9 * paths.PATH_BUDGET
+
+
+def test_a_lifted_hemisphere_s_rim_sources_take_graded_refined_seeds():
+    """A hemisphere lifted from random points in the plane (tests/meshgen.steep_rim(2000, 1, 0.5, 1)):
+    its rim stands vertical, so the triangles there are needles and the map is mildly anisotropic
+    (1.13-1.19). Against exact MMP (geodesic_ref_lifted_hemisphere.npz), three rim sources at the
+    automatic grid: mean below 0.1 % and max below 2 %, each taking the refined seed. Before, the
+    refined seed's Steiner paths were not graded on the needles (0.21 % and 0.15 % mean, 3.4 % and
+    2.5 % max, a constant offset from the source), and a source whose triangles' anisotropy was 1.13-1.15
+    took the plain seed (0.19 % short everywhere)."""
+    ref = np.load(os.path.join(DATA, 'geodesic_ref_lifted_hemisphere.npz'))
+    V, F = ref['V'], ref['F'].astype(np.int64)
+    gs = geo.GeodesicSolver(V, F)
+    diag = np.linalg.norm(np.ptp(V, axis=0))
+    for s, D in zip(ref['sources'], ref['dist']):
+        d, rep = gs.distance([int(s)])
+        far = np.linalg.norm(V - V[s], axis=1) > 0.02 * diag
+        e = np.abs(d[far] - D[far]) / D[far]
+        assert rep['refined_sources'] == 1 and e.mean() < 1e-3 and e.max() < 0.02, (s, e.mean(), e.max())
 
 
 def test_steiner_points_trade_accuracy_for_speed_with_an_honest_estimate():

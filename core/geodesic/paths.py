@@ -312,7 +312,8 @@ class SurfacePaths:
         return dv, dS, ev
 
 
-def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapolate=False, excess=False):
+def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapolate=False, excess=False,
+                      graded=False):
     """Shortest paths on the surface of the triangles ``F`` (m,3) (vertices ``V`` (n,3)) from source
     vertices ``src`` (an index or (s,) indices: the distance to the nearest) and/or surface points
     ``X`` in ``src_faces`` (as ``SteinerGraph.search``), through ``k`` Steiner points on
@@ -320,15 +321,17 @@ def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapo
     each triangle by the straight segment inside it. Each graph path is a path on the surface, so the
     distances are upper bounds of the geodesic ones, and tend to them as ``k`` grows (docs/geodesic.md,
     "Refined seed"). ``extrapolate`` (``k`` odd): Richardson's extrapolation from the graph of
-    ``(k - 1) / 2`` points per edge too (``SurfacePaths``: no longer an upper bound). The graphs are
-    built for this one search: keep a ``SurfacePaths`` to search one mesh many times.
+    ``(k - 1) / 2`` points per edge too (``SurfacePaths``: no longer an upper bound), with ``graded``
+    more points on the edges of thin triangles (``edge_grading``, as ``SurfacePaths`` grades them).
+    The graphs are built for this one search: keep a ``SurfacePaths`` to search one mesh many times.
     Returns ``(dv (n,) at the vertices, inf off F; dS (p,) at every graph point; P (p,3) the points;
-    own (m, 3 + 3k) the points on each triangle's boundary)``, and with ``excess`` (and
-    ``extrapolate``) also ``ev`` (n,): the estimated excess of the ``k``-point paths over the geodesic
-    at the vertices (the correction subtracted; 0 off F)."""
+    graph, the ``SteinerGraph`` searched (``graph.boundary`` gives the points on each triangle's
+    boundary; its first n points are the vertices))``, and with ``excess`` (and ``extrapolate``) also
+    ``ev`` (n,): the estimated excess of the ``k``-point paths over the geodesic at the vertices (the
+    correction subtracted; 0 off F)."""
     n = len(V)
     if extrapolate and k >= 3 and k % 2 == 1:
-        pair = SurfacePaths(V, F, k)
+        pair = SurfacePaths(V, F, k, graded=graded)
         dv, dS, ev = pair.distances(src, X, src_faces)
         graph = pair.fine
     else:
@@ -339,8 +342,8 @@ def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapo
         dv[used] = dS[used]
         ev = np.zeros(n)
     if excess:
-        return dv, dS, graph.P, graph.own, ev
-    return dv, dS, graph.P, graph.own
+        return dv, dS, graph.P, graph, ev
+    return dv, dS, graph.P, graph
 
 
 # ``surface_paths`` divides the plain k-point paths' mean excess (the Richardson correction) by this to
