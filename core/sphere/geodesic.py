@@ -122,10 +122,11 @@ def _march(phi, chart, solver, T0=None, narrow=0.0):
     return march(T0, phi < 0, phi, chart.speed, mask, chart.h, solver)
 
 
-def _unresolved_fraction(V, F, S, charts):
-    """The area fraction of the mesh (V (n,3), F (m,3)) that the ``charts`` do not resolve: a triangle
-    whose surface cell (the chart's cell over its speed there, in the chart where its centroid is more
-    interior) is above twice its mean edge (docs/geodesic.md, "Sphere mode")."""
+def _chart_resolution(V, F, S, charts):
+    """How well the ``charts`` resolve the mesh (V (n,3), F (m,3)): ``(unresolved, cell)``, the area
+    fraction whose surface cell (the chart's cell over its speed there, in the chart where the
+    triangle's centroid is more interior) is above twice the triangle's mean edge (docs/geodesic.md,
+    "Sphere mode"), and the area-weighted mean surface cell (mesh units) over the other triangles."""
     cen = S[F].mean(1)
     cen /= np.linalg.norm(cen, axis=1)[:, None]
     edge = np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean(1)
@@ -136,9 +137,10 @@ def _unresolved_fraction(V, F, S, charts):
         sp_c = c.sample(c.speed, c.coords_of(cen[sel]))
         cell[sel] = c.h / np.where(np.isfinite(sp_c) & (sp_c > 0), sp_c, np.nan)
     A = face_areas(V, F)
-    bad_f = ~(cell <= 2.0 * edge)
-    unresolved = float(A[bad_f].sum() / A.sum())
-    return unresolved
+    good = cell <= 2.0 * edge
+    unresolved = float(A[~good].sum() / A.sum())
+    mean_cell = float((A[good] * cell[good]).sum() / A[good].sum()) if good.any() else float('nan')
+    return unresolved, mean_cell
 
 
 def _march_charts(charts, S, src, logmu_v, R, solver, source_radius, flips):
@@ -279,10 +281,11 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     measured against exact distances, the paths are 4-15x more accurate than the march even where
     the charts resolve the surface (the blobs of bench/sphere.py: 0.026-0.032 % against 0.12-0.41 %
     mean, max 0.25 % against 1.1-3.8 %) at 2-3x its time, and where they do not the march fails
-    (spot, cheburashka: docs/geodesic.md, "Sphere mode"); the march has no error estimate, the paths
-    have one. Why the whole mesh and not a patch of the unresolved region: a geodesic may cross that
+    (spot, cheburashka: docs/geodesic.md, "Sphere mode"); the paths' error estimate is their own, the
+    march's the planar solver's model (cruder, 1-5x cautious where the charts resolve the surface).
+    Why the whole mesh and not a patch of the unresolved region: a geodesic may cross that
     region and come back, so the march cannot be mended locally. ``report['method']`` says which
-    ran; ``report['error_estimate']`` (mean relative) is the paths' estimate, or None after a march;
+    ran; ``report['error_estimate']`` (mean relative) is the paths' estimate or the march's;
     ``unresolved_fraction``, ``grid`` and ``sphere`` (the map's measures) are None or absent when the
     charts were not built."""
     from ..mesh.measures import vertex_mu
@@ -333,7 +336,7 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
         say(0.2, 'rasterising the charts')
         charts = [_Chart('N', S, F, logmu_v, R, grid), _Chart('S', S, F, logmu_v, R, grid)]
         # how well the charts resolve the surface, and which method answers (see the docstring)
-        unresolved = _unresolved_fraction(V, F, S, charts)
+        unresolved, mean_cell = _chart_resolution(V, F, S, charts)
         if 'sphere' in report:
             flips = int(report['sphere']['flips'] or 0)
         else:
@@ -352,7 +355,16 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
         say(0.3, 'marching')
         t = time.perf_counter()
         dist, used, buckets, W = _march_charts(charts, S, src, logmu_v, R, solver, source_radius, flips)
-        estimate, chosen, k = None, 'charts', None
+        # the planar solver's model (``error_estimate``) with the charts' cell and the spread of the
+        # per-vertex mu they march with; the unresolved area counts as on-mesh. Against exact MMP
+        # (source 7): the blobs of bench/sphere.py 0.42-1.06 % for 0.12-0.31 %, a random closed
+        # triangulation of 10k triangles 0.35 % for 0.29 %, spot 1.42 % for 1.42 % (cheburashka
+        # 1.14 % for 6.9 %: 40 % of it unresolved, which warns on its own)
+        from ..geodesic.solver import error_estimate, mu_spread
+        fin = np.isfinite(dist)
+        estimate = error_estimate(mean_cell, float(np.median(dist[fin])) if fin.any() else 1.0,
+                                  mu_spread(F, mu_f, face_areas(V, F)), 0.0, unresolved, 0.0, 0)
+        chosen, k = 'charts', None
     seconds_march = time.perf_counter() - t
     dist[src] = 0.0
     if not np.isfinite(dist).all():
@@ -374,6 +386,10 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     dist = np.clip(dist, E3, np.maximum(upper, E3))
     warnings = []
     if chosen == 'charts':
+        if estimate > ERROR_TARGET:
+            warnings.append(f"the sphere march's error estimate is {100 * estimate:.2g}% (target "
+                            f"{100 * ERROR_TARGET:.2g}%): use method='paths' if memory allows, or cut the "
+                            "mesh along seams and use the planar solver")
         if flips:
             warnings.append(f"the sphere map folds {flips} triangles: distances through them are unreliable; "
                             "use method='paths', or cut the mesh along seams and use the planar solver")
@@ -402,7 +418,7 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
         warnings.append(f"{nv} vertices ({100 * nv / n:.2g}%) fell outside the exact bounds (3D distance, "
                         f"edge paths) and were clamped: {what} inaccurate on this mesh")
     report.update({'method': chosen, 'steiner_points': k, 'error_estimate': estimate,
-                   'error_target': ERROR_TARGET if chosen == 'paths' else None,
+                   'error_target': ERROR_TARGET,
                    'grid': list(charts[0].G.shape) if charts else None,
                    'cell': [c.h for c in charts] if charts else None, 'charts': 2 if charts else 0,
                    'overlap_deg': overlap, 'buckets': buckets, 'bucket_width': W, 'solver': used,
