@@ -401,6 +401,13 @@ def grading_room(n_faces, n_edges, k):
     return min(GRADE_EXTRA_MAX, max(GRADE_EXTRA, 0.9 * PATH_BUDGET / base - 1.0))
 
 
+def graded_fit(n_faces, n_edges, need, k_max, k_min=PATH_K[-1]):
+    """The largest odd ``k`` in ``k_min..k_max`` whose ``grading_room`` holds a full grading that adds
+    ``need`` (``grade_extra``), or None."""
+    return next((j for j in range(k_max if k_max % 2 else k_max - 1, k_min - 1, -2)
+                 if grading_room(n_faces, n_edges, j) >= need), None)
+
+
 def graded_k(V, F, k, cache=None):
     """The Steiner points per edge to build for a requested ``k`` (odd) on the triangles ``F`` (m,3)
     (vertices ``V`` (n,3)): ``k``; or, where its graphs would leave thin triangles over ``SHORT_AREA``
@@ -421,8 +428,7 @@ def graded_k(V, F, k, cache=None):
     need = grade_extra(full, inv)
     out = k
     if need > grading_room(len(F), len(ue), k):
-        fit = next((j for j in range(k - 2, PATH_K[-1] - 1, -2) if grading_room(len(F), len(ue), j) >= need),
-                   None)
+        fit = graded_fit(len(F), len(ue), need, k - 2)
         if fit is not None:
             from ..mesh.geometry import face_areas
             short = (edge_grading(V, F, ue, inv, grading_room(len(F), len(ue), k), amin)[inv]
@@ -503,14 +509,13 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
         if 'n_edges' not in cache:
             from ..mesh.topology import unique_edges
             cache['n_edges'] = len(unique_edges(F)[0])
-        # a graph whose thin triangles all got their graded points stays so: more points per edge with
-        # fewer on the needles gave worse maxima (a scan's steep flank: 1.1 % at k = 11 fully graded,
-        # 4.2 % at k = 13 and 15 short of them)
-        budget = PATH_BUDGET
-        if fit_grading and pair.short[1] == 0 and pair.grade_need > GRADE_EXTRA:
-            budget = min(budget, int(0.9 * PATH_BUDGET / (1.0 + pair.grade_need)))
-        k_new = path_points(len(F), cache['n_edges'], budget=budget, k_min=k + 2,
-                            k_max=min(int(np.ceil(want)) | 1, k_max))
+        k_hi = min(int(np.ceil(want)) | 1, k_max)
+        if fit_grading and pair.short[1] == 0:
+            # a graph whose thin triangles all got their graded points stays so: more points per edge
+            # with fewer on the needles gave worse maxima (a scan's steep flank: 1.1 % at k = 11 fully
+            # graded, 4.2 % at k = 13 and 15 short of them)
+            k_hi = graded_fit(len(F), cache['n_edges'], pair.grade_need, k_hi, k + 2) or k
+        k_new = path_points(len(F), cache['n_edges'], k_min=k + 2, k_max=k_hi)
         if k_new is None:
             return dv, estimate, k
         first = (dv, estimate, k)
