@@ -113,35 +113,28 @@ def main(argv=None):
               f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
     # the largest island of suzanne.obj cut along its OBJ seams, as a mesh of its own (a disk)
     Vi, Fi = suzanne_island()
-    src = (0, len(Vi) // 2, len(Vi) - 1)
-    D = exact_distances(Vi, Fi, src)
-    path = os.path.join(DATA, 'geodesic_ref_suzanne_island.npz')
-    np.savez_compressed(path, V=Vi.astype(np.float64), F=Fi.astype(np.int32),
-                        sources=np.array(src, np.int32), dist=D)
-    print(f"suzanne's largest island ({len(Fi)} triangles) sources {src} -> "
-          f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
+    _mesh_ref('suzanne_island', "suzanne's largest island", Vi, Fi, (0, len(Vi) // 2, len(Vi) - 1))
     # a scan-like disk (random points, Delaunay-triangulated and lifted; tests/meshgen.py)
     sys.path.insert(0, os.path.join(ROOT, 'tests'))
     from meshgen import scan_patch, steep_rim
-    Vs, Fs = scan_patch(1500, 3)
-    src = SCAN_SOURCES
-    D = exact_distances(Vs, Fs, src)
-    path = os.path.join(DATA, 'geodesic_ref_scan_patch.npz')
-    np.savez_compressed(path, V=Vs.astype(np.float64), F=Fs.astype(np.int32),
-                        sources=np.array(src, np.int32), dist=D)
-    print(f"scan_patch(1500, 3) ({len(Fs)} triangles) sources {src} -> "
-          f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
+    _mesh_ref('scan_patch', 'scan_patch(1500, 3)', *scan_patch(1500, 3), SCAN_SOURCES)
     # a lifted hemisphere (z = sqrt(1 - r^2) over random points: needles at its vertical rim)
-    Vh, Fh = steep_rim(2000, 1, 0.5, 1.0)
-    D = exact_distances(Vh, Fh, HEMI_SOURCES)
-    path = os.path.join(DATA, 'geodesic_ref_lifted_hemisphere.npz')
-    np.savez_compressed(path, V=Vh.astype(np.float64), F=Fh.astype(np.int32),
-                        sources=np.array(HEMI_SOURCES, np.int32), dist=D)
-    print(f"steep_rim(2000, 1, 0.5, 1.0) ({len(Fh)} triangles) sources {HEMI_SOURCES} -> "
-          f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
+    _mesh_ref('lifted_hemisphere', 'steep_rim(2000, 1, 0.5, 1.0)', *steep_rim(2000, 1, 0.5, 1.0),
+              HEMI_SOURCES)
     if args.closed:
         return 0
     return _surfaces(REFS)
+
+
+def _mesh_ref(name, label, V, F, sources):
+    """Write ``geodesic_ref_<name>.npz``: the mesh (``V`` float64 (k,3), ``F`` int32 (m,3)) with the
+    exact distances from its vertices ``sources``; ``label`` names it in the printout."""
+    D = exact_distances(V, F, sources)
+    path = os.path.join(DATA, f'geodesic_ref_{name}.npz')
+    np.savez_compressed(path, V=V.astype(np.float64), F=F.astype(np.int32),
+                        sources=np.array(sources, np.int32), dist=D)
+    print(f"{label} ({len(F)} triangles) sources {tuple(sources)} -> "
+          f"{os.path.relpath(path, ROOT)} ({os.path.getsize(path) // 1024} KB)")
 
 
 def _surfaces(refs):
