@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
 from ..geodesic.paths import PATH_K, PATH_K_MAX, path_points, surface_paths, thin_warning
-from ..geodesic.solver import ERROR_TARGET
+from ..geodesic.solver import ERROR_TARGET, error_estimate, mu_spread
 from ..mesh.topology import unique_edges
 from ..mesh.validate import check_mesh
 from .map import sphere_map
@@ -360,7 +360,6 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
         # (source 7): the blobs of bench/sphere.py 0.42-1.06 % for 0.12-0.31 %, a random closed
         # triangulation of 10k triangles 0.35 % for 0.29 %, spot 1.42 % for 1.42 % (cheburashka
         # 1.14 % for 6.9 %: 40 % of it unresolved, which warns on its own)
-        from ..geodesic.solver import error_estimate, mu_spread
         fin = np.isfinite(dist)
         estimate = error_estimate(mean_cell, float(np.median(dist[fin])) if fin.any() else 1.0,
                                   mu_spread(F, mu_f, face_areas(V, F)), 0.0, unresolved, 0.0, 0)
