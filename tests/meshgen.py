@@ -262,8 +262,6 @@ def steep_rim(n=3000, seed=1, power=0.25, height=0.8):
     P = P[(P ** 2).sum(1) < 0.97][:n]
     t = np.linspace(0, 2 * np.pi, int(4 * np.sqrt(n)), endpoint=False)
     P = np.vstack([np.c_[np.cos(t), np.sin(t)], P])
+    from core.surfaces import _ccw
     z = height * np.maximum(1 - (P ** 2).sum(1), 0) ** power
-    F = Delaunay(P).simplices
-    e1, e2 = P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]]
-    A = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    return np.c_[P, z], np.where((A < 0)[:, None], F[:, [0, 2, 1]], F)
+    return np.c_[P, z], _ccw(P, Delaunay(P).simplices)

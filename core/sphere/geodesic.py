@@ -330,8 +330,9 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
         # sphere length per surface length, per triangle (unnormalised) and per vertex
         P = S[F]
         a_s = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
-        mu_f = np.sqrt(np.maximum(a_s, np.finfo(float).tiny) / face_areas(V, F))
-        logmu_v = np.log(vertex_mu(F, mu_f, face_areas(V, F), n))
+        area = face_areas(V, F)
+        mu_f = np.sqrt(np.maximum(a_s, np.finfo(float).tiny) / area)
+        logmu_v = np.log(vertex_mu(F, mu_f, area, n))
         R = float(np.tan(np.radians(45.0 + 0.5 * overlap)))
         say(0.2, 'rasterising the charts')
         charts = [_Chart('N', S, F, logmu_v, R, grid), _Chart('S', S, F, logmu_v, R, grid)]
@@ -362,7 +363,7 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
         # 1.14 % for 6.9 %: 40 % of it unresolved, which warns on its own)
         fin = np.isfinite(dist)
         estimate = error_estimate(mean_cell, float(np.median(dist[fin])) if fin.any() else 1.0,
-                                  mu_spread(F, mu_f, face_areas(V, F)), 0.0, unresolved, 0.0, 0)
+                                  mu_spread(F, mu_f, area), 0.0, unresolved, 0.0, 0)
         chosen, k = 'charts', None
     seconds_march = time.perf_counter() - t
     dist[src] = 0.0
