@@ -934,7 +934,8 @@ def test_surface_paths_estimate_is_not_below_the_error_on_a_scan_like_mesh():
     regular meshes). The estimate must not promise more than it gives: against exact MMP
     (geodesic_ref_scan_patch.npz), for three sources, the estimate is at least the measured mean error
     and at most 3x it (with the earlier gain of 2.5 it was 0.77-0.86x of it), and with the 0.1 %
-    target the refined paths meet it."""
+    target the paths meet it (they search the mesh's intrinsic Delaunay triangulation, its triangles
+    being thin: ``path_triangulation``)."""
     from core.geodesic import paths
     ref = np.load(os.path.join(DATA, 'geodesic_ref_scan_patch.npz'))
     V, F = ref['V'], ref['F'].astype(np.int64)
@@ -947,7 +948,32 @@ def test_surface_paths_estimate_is_not_below_the_error_on_a_scan_like_mesh():
         assert k == 9 and e.mean() <= est <= 3 * e.mean(), (s, est, e.mean())
         d, est, k = paths.surface_paths(V, F, [int(s)], 9, target=1e-3, cache=cache)
         e = np.abs(d[far] - D[far]) / D[far]
-        assert k > 9 and est <= 1e-3 and e.mean() < 1e-3 and e.max() < 0.02, (s, k, est, e.mean(), e.max())
+        assert k >= 9 and est <= 1e-3 and e.mean() < 1e-3 and e.max() < 0.02, (s, k, est, e.mean(), e.max())
+    assert cache['triangulation'] is not None
+
+
+def test_surface_paths_search_the_intrinsic_delaunay_triangulation_of_slivers():
+    """A CAD-like closed part whose triangles are those of a convex hull of random points (slivers over
+    most of the area, tests/meshgen.cylinder_hull): the Steiner graphs on its own triangles came out
+    87 % off on the mean at k = 9 (the graded points cannot reach corners of 0.001 degrees), with an
+    estimate of 2 %. The paths search its intrinsic Delaunay triangulation (edge flips, the same
+    surface). On the cylinder's side the exact distance is the unrolled helix's, sqrt((r dtheta)^2 +
+    dz^2) (MMP agrees to 0.005 %): mean error under 0.1 %, max under 2 %, the estimate at least
+    the mean error; the mesh's own triangles, forced, are several percent off."""
+    from core.geodesic import paths
+    from meshgen import cylinder_hull
+    V, F = cylinder_hull(3000)
+    z, th = V[:, 2], np.arctan2(V[:, 1], V[:, 0])
+    s = int(np.argmin(np.abs(z) + np.abs(th)))          # a side vertex at z = 0, theta = 0
+    exact = np.hypot(0.5 * np.abs((th - th[s] + np.pi) % (2 * np.pi) - np.pi), z - z[s])
+    side = (np.abs(z) < 0.6) & (exact > 0.05)
+    cache = {}
+    d, est, k = paths.surface_paths(V, F, [s], 9, target=1e-3, cache=cache)
+    assert cache['triangulation'] is not None
+    e = np.abs(d[side] - exact[side]) / exact[side]
+    assert e.mean() < 1e-3 and e.max() < 0.02 and est >= e.mean(), (e.mean(), e.max(), est)
+    d0, _, _ = paths.surface_paths(V, F, [s], 9, cache={'triangulation': None})
+    assert (np.abs(d0[side] - exact[side]) / exact[side]).mean() > 0.01
 
 
 def test_surface_paths_refine_without_starving_their_needles(monkeypatch):
@@ -957,11 +983,13 @@ def test_surface_paths_refine_without_starving_their_needles(monkeypatch):
     MMP: max 1.1 % at k = 11 fully graded, 4.2 % at k = 13 and 15 short of their points). So the
     graphs start at the largest k whose full grading fits (``graded_k``), a fully graded graph is
     refined only as far as that still holds, and a refined answer is kept only if its estimate is not
-    above the first one's."""
+    above the first one's. The mesh's own triangles, as point sources search them (vertex sources
+    search its intrinsic Delaunay triangulation, whose needles are fewer)."""
     from core.geodesic import paths
     from meshgen import steep_rim
     V, F = steep_rim(2000)
     monkeypatch.setattr(paths, 'PATH_BUDGET', 6_000_000)
+    monkeypatch.setattr(paths, 'path_triangulation', lambda V, F, cache=None: None)
     cache = {}
     d9, est9, _ = paths.surface_paths(V, F, [0], 9, cache=cache)
     d, est, k = paths.surface_paths(V, F, [0], 9, target=1e-3, cache=cache)
