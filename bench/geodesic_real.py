@@ -16,7 +16,8 @@ exact reference is MMP on the same cut surface (its split vertices), restricted 
 Head-like disks (stand-ins for the held-out scans): ``--meshes cow-cut spot-cut2 cheburashka-cut1``
 (``meshes.HEAD_CUTS``, then the given number of Loop subdivisions). Scan-like meshes of our own
 (random points with a denser patch, Delaunay-triangulated and lifted, with noise): ``--meshes
-facescan faceholes deepcap`` (``meshes.scan_like``).
+facescan faceholes deepcap`` (``meshes.scan_like``). Closed CAD-like parts of slivers, in sphere mode:
+``--meshes --sphere cylinderhull boxhull`` (``meshes.HULLS``).
 
 Errors: relative to the exact distance, mean and max over the vertices of the source's part farther
 than ``EXCLUDE`` times the part's bounding-box diagonal from the source; a vertex split by a seam counts
@@ -96,9 +97,13 @@ def load(name):
     if name in SURF:
         V, F = make_surface(name, 65)
         return V, F, None
-    from meshes import SCANS, scan_like
+    from meshes import HULLS, SCANS, scan_like
     if name in SCANS:                       # scan-like meshes of our own (bench/meshes.py)
         V, F = scan_like(name)
+        return V, F, None
+    if name in HULLS:                       # closed CAD-like parts of slivers (sphere mode)
+        from core.surfaces import hull_part
+        V, F = hull_part(name[:-4])
         return V, F, None
     if '-cut' in name:                      # head-like disks of bench/cones.py: 'cow-cut', 'spot-cut2', ...
         from meshes import HEAD_CUTS, cut_disk, loop_subdivide

@@ -78,3 +78,4 @@ def scan_like(name):
 
 
 SCANS = ('facescan', 'faceholes', 'deepcap', 'steepface')
+HULLS = ('cylinderhull', 'boxhull')  # closed CAD-like parts of slivers (``core.surfaces.hull_part``)

@@ -182,3 +182,27 @@ def scan_like(name):
         return np.c_[P, _face_height(P) + rng.normal(scale=0.002, size=len(P))], F
     return None
 
+
+def hull_part(kind='cylinder', n=6000, seed=1, p=16.0):
+    """A closed CAD-like part standing in for CAD meshes in the benchmarks and tests: the convex hull of
+    ``n`` random points on a rounded solid whose faces are nearly flat (the superellipse of exponent
+    ``p``), so its triangles are what a hull of random points gives (slivers down to a thousandth of
+    a degree over most of the area). ``kind`` 'cylinder' (radius 0.5, height 2:
+    ``(r / 0.5)^p + |z|^p = 1``) or 'box' (2 x 1.2 x 0.7). Returns ``V`` (k,3), ``F`` (m,3)
+    counter-clockwise seen from outside, every vertex used."""
+    from scipy.spatial import ConvexHull
+    D = np.random.default_rng(seed).normal(size=(n, 3))
+    if kind == 'cylinder':
+        s = ((np.hypot(D[:, 0], D[:, 1]) / 0.5) ** p + np.abs(D[:, 2]) ** p) ** (1 / p)
+    elif kind == 'box':
+        s = ((np.abs(D) / [1.0, 0.6, 0.35]) ** p).sum(1) ** (1 / p)
+    else:
+        raise ConformalError(f"unknown hull part {kind!r}: use 'cylinder' or 'box'")
+    X = D / s[:, None]
+    F = ConvexHull(X).simplices
+    N = np.cross(X[F[:, 1]] - X[F[:, 0]], X[F[:, 2]] - X[F[:, 0]])
+    F = np.where(((N * (X[F].mean(1) - X.mean(0))).sum(1) < 0)[:, None], F[:, [0, 2, 1]], F)
+    used = np.unique(F)
+    new = np.full(n, -1, np.int64)
+    new[used] = np.arange(len(used))
+    return X[used], new[F]

@@ -267,17 +267,9 @@ def steep_rim(n=3000, seed=1, power=0.25, height=0.8):
     return np.c_[P, z], _ccw(P, Delaunay(P).simplices)
 
 
-def cylinder_hull(n=3000, seed=1, p=16.0):
-    """A closed CAD-like part: the convex hull of ``n`` random points on a rounded cylinder (radius 0.5,
-    height 2; its side and caps the superellipse ``(r / 0.5)^p + |z|^p = 1``), so that its faces are
-    nearly flat and its triangles are those a hull of random points gives (slivers down to a
-    thousandth of a degree over most of the area). Returns ``V`` (k,3), ``F`` (m,3) counter-clockwise
-    seen from outside."""
-    from scipy.spatial import ConvexHull
-    D = np.random.default_rng(seed).normal(size=(n, 3))
-    s = ((np.hypot(D[:, 0], D[:, 1]) / 0.5) ** p + np.abs(D[:, 2]) ** p) ** (1 / p)
-    X = D / s[:, None]
-    F = ConvexHull(X).simplices
-    N = np.cross(X[F[:, 1]] - X[F[:, 0]], X[F[:, 2]] - X[F[:, 0]])
-    F = np.where(((N * (X[F].mean(1) - X.mean(0))).sum(1) < 0)[:, None], F[:, [0, 2, 1]], F)
-    return compact(X, F.astype(np.int64))
+
+def cylinder_hull(n=3000, seed=1):
+    """A closed CAD-like part of slivers: ``core.surfaces.hull_part('cylinder', n, seed)``, smaller than
+    the benchmark's. Returns ``V`` (k,3), ``F`` (m,3)."""
+    from core.surfaces import hull_part
+    return hull_part('cylinder', n, seed)

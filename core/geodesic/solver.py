@@ -59,7 +59,7 @@ from ..mesh.geometry import face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
 from .planar import plane_coordinates, planar_paths
 from .paths import (PATH_BUDGET, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, SteinerGraph, path_points,
-                    thin_warning, steiner_distances, surface_paths)
+                    path_triangulation, thin_warning, steiner_distances, surface_paths)
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
 METHODS = ('auto', 'grid', 'paths')
@@ -1359,6 +1359,11 @@ def paths_choice(ch, method, grid, mu_mode):
     m, ne = len(ch.F), len(unique_edges(ch.F)[0])
     if method == 'paths':
         return path_points(m, ne) or PATH_K[-1]
+    if path_points(m, ne, k_min=PATH_K[0]) and path_triangulation(ch.V, ch.F, ch.paths_cache) is not None:
+        # thin triangles (needles on a scan's steep flanks): the grid's re-marches undershoot on them
+        # and at the boundary beside them (a lifted hemisphere's rim: 2.2 % max, rising with the
+        # grid), and the paths search the intrinsic Delaunay triangulation there (0.62 %)
+        return PATH_K[0]
     marches = 1 + (ch.planned_passes if mu_mode == 'metric' else 0)
     k = path_points(m, ne, min(PATH_BUDGET, PATH_COST * ch.nodes * marches), PATH_K[0], PATH_K_MAX)
     if k is None:
