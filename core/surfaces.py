@@ -189,7 +189,8 @@ def hull_part(kind='cylinder', n=6000, seed=1, p=16.0):
     ``p``), so its triangles are what a hull of random points gives (slivers down to a thousandth of
     a degree over most of the area). ``kind`` 'cylinder' (radius 0.5, height 2:
     ``(r / 0.5)^p + |z|^p = 1``) or 'box' (2 x 1.2 x 0.7). Returns ``V`` (k,3), ``F`` (m,3)
-    counter-clockwise seen from outside, every vertex used."""
+    counter-clockwise seen from outside, every vertex used; the box, like a CAD export, also has a
+    few zero-area triangles (qhull's triangulated flat facets) wound either way."""
     from scipy.spatial import ConvexHull
     D = np.random.default_rng(seed).normal(size=(n, 3))
     if kind == 'cylinder':
@@ -199,9 +200,11 @@ def hull_part(kind='cylinder', n=6000, seed=1, p=16.0):
     else:
         raise ConformalError(f"unknown hull part {kind!r}: use 'cylinder' or 'box'")
     X = D / s[:, None]
-    F = ConvexHull(X).simplices
+    hull = ConvexHull(X)
+    F = hull.simplices
+    # wound by qhull's outward facet normals (a sliver's own cross product can point either way)
     N = np.cross(X[F[:, 1]] - X[F[:, 0]], X[F[:, 2]] - X[F[:, 0]])
-    F = np.where(((N * (X[F].mean(1) - X.mean(0))).sum(1) < 0)[:, None], F[:, [0, 2, 1]], F)
+    F = np.where(((N * hull.equations[:, :3]).sum(1) < 0)[:, None], F[:, [0, 2, 1]], F)
     used = np.unique(F)
     new = np.full(n, -1, np.int64)
     new[used] = np.arange(len(used))

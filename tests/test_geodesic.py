@@ -976,6 +976,12 @@ def test_surface_paths_search_the_intrinsic_delaunay_triangulation_of_slivers():
     assert e.mean() < 1e-3 and e.max() < 0.02 and est >= e.mean(), (e.mean(), e.max(), est)
     d0, _, _ = paths.surface_paths(V, F, [s], 9, cache={'triangulation': None})
     assert (np.abs(d0[side] - exact[side]) / exact[side]).mean() > 0.01
+    # triangles wound the wrong way (a CAD export's zero-area ones are): the same intrinsic paths
+    Fw = F.copy()
+    Fw[::50] = Fw[::50, ::-1]
+    cache = {}
+    dw, _, _ = paths.surface_paths(V, Fw, [s], 9, target=1e-3, cache=cache)
+    assert cache['triangulation'] is not None and np.allclose(dw, d, rtol=1e-12)
 
 
 def test_surface_paths_refine_without_starving_their_needles(monkeypatch):

@@ -496,14 +496,21 @@ def path_triangulation(V, F, cache=None):
     cache = {} if cache is None else cache
     if 'triangulation' in cache:
         return cache['triangulation']
+    from ..errors import ConformalError
     from ..mesh.intrinsic import intrinsic_delaunay
+    from ..mesh.repair import oriented_faces
     out = None
     ue, inv = mesh_edges(F)
     need = grade_extra(edge_grading(V, F, ue, inv, np.inf), inv)
     if need > GRADE_EXTRA:
-        T = intrinsic_delaunay(V, F, mollify_delta=0.0)
-        lengths = T.l
-        if T.report['flips'] and np.isfinite(lengths).all():
+        try:
+            # flips need one winding; a distance does not depend on it (triangles wound the wrong way
+            # are turned, as sphere mode and the planar solver turn them)
+            T = intrinsic_delaunay(V, oriented_faces(V, F), mollify_delta=0.0)
+        except ConformalError:              # not a manifold the flips can walk: the mesh's own triangles
+            T = None
+        lengths = None if T is None else T.l
+        if T is not None and T.report['flips'] and np.isfinite(lengths).all():
             ue2, inv2 = mesh_edges(T.F)
             amin = edge_corner_angles(V, T.F, inv2, len(ue2), lengths)
             if grade_extra(edge_grading(V, T.F, ue2, inv2, np.inf, amin), inv2) < need:
