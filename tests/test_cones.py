@@ -778,4 +778,7 @@ def test_untangle_s_linear_programs_match_highs_exactly():
         assert abs(np.abs(p).sum() - res.fun) < 1e-9 and (g @ p >= c - 1e-9).all(), (p, res.x)
         solved += 1
     assert solved > 100
+    ring = np.linspace(0, 2 * np.pi, 60, endpoint=False)         # a ring too big to enumerate: HiGHS
+    g = np.c_[np.cos(ring), np.sin(ring)]
+    assert abs(ring_clearance(g, np.full(60, 0.5)) - 0.5) < 1e-9
     assert l1_nearest(np.array([[1.0, 0.0], [-1.0, 0.0]]), np.array([1.0, 0.0])) is None   # x >= 1, x <= 0

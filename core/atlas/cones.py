@@ -1306,6 +1306,9 @@ def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS, Vc=None):
     return rounds
 
 
+RING_ENUMERATE = 40   # ``ring_clearance`` enumerates the vertices of rings up to this many triangles
+
+
 @lru_cache(maxsize=None)
 def _choose(n, k):
     """(k, C(n, k)) int: every ``k`` of ``range(n)``, as rows of indices (kept per size)."""
@@ -1319,9 +1322,14 @@ def ring_clearance(g, h):
     Chebyshev centre of the kernel of a vertex's ring, ``g`` (r,2) unit normals, ``h`` (r,)): the
     linear program in ``(p, t)`` solved exactly at its vertices, every three active constraints of
     the ``r`` ring's and the box's four (a ring holds a few to a few dozen triangles; scipy's
-    ``linprog`` took 2 ms a call, 43 s of a 4k-triangle CAD-like part's 65 s unwrap). Returns ``t``
+    ``linprog`` took 2 ms a call, 43 s of a 4k-triangle CAD-like part's 65 s unwrap). A ring of more
+    than ``RING_ENUMERATE`` triangles (the triples grow as r^3) goes to ``linprog``. Returns ``t``
     (-inf if no vertex is feasible)."""
     r = len(g)
+    if r > RING_ENUMERATE:
+        res = linprog([0, 0, -1], A_ub=np.c_[-g, np.ones(r)], b_ub=h,
+                      bounds=[(-1, 1), (-1, 1), (None, None)], method='highs')
+        return float(res.x[2]) if res.status == 0 else -np.inf
     # constraints as rows of A x >= b, x = (p0, p1, t)
     A = np.r_[np.c_[g, -np.ones(r)], [[-1, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0]]]
     b = np.r_[-h, -1.0, -1.0, -1.0, -1.0]

@@ -113,7 +113,11 @@ class SteinerGraph:
     (N,), whose last row is a virtual source that ``search`` joins to surface points (its ``SPARE``
     slots are rewritten per search). ``search`` takes and returns points in the order of ``P``.
     ``grade`` (e,) int: per-edge multipliers over the sorted edges (``edge_grading``), or None;
-    ``edges``: ``(ue, inv)`` if the caller has them (``mesh_edges``)."""
+    ``edges``: ``(ue, inv)`` if the caller has them (``mesh_edges``). ``lengths`` (m,3): ``F`` is an
+    intrinsic triangulation with these side lengths (opposite each corner, ``core.mesh.intrinsic``):
+    each link is measured in its triangle's planar copy, ``P`` is then only where the points would lie
+    on the chords between ``V``'s vertices (it orders the graph), and searches take vertex sources
+    only (``intrinsic`` True)."""
 
     SPARE = 256   # link slots of the virtual source (a point in a triangle needs 3 + 3k of them)
 
@@ -176,9 +180,8 @@ class SteinerGraph:
                 W.append(np.repeat(el[es] / (c + 1.0), c + 1))
         a, b = np.concatenate(A), np.concatenate(B)
         N = len(pts)
-        # csgraph drops explicit zeros
-        w = np.maximum(np.concatenate(W) if lengths is not None else np.linalg.norm(pts[a] - pts[b], axis=1),
-                       1e-300)
+        w = np.concatenate(W) if lengths is not None else np.linalg.norm(pts[a] - pts[b], axis=1)
+        w = np.maximum(w, 1e-300)                                            # csgraph drops explicit zeros
         # the graph numbers its points along a Morton (Z-order) curve of their positions, so that the
         # rows Dijkstra relaxes one after another lie close in memory (spot, k = 9: 64 -> 54 ms a search
         # of this graph);
@@ -283,7 +286,8 @@ class SurfacePaths:
     and ``(k + 1) / 2 m_e - 1`` points), adding at most ``GRADE_EXTRA`` to the links or, where
     ``PATH_BUDGET`` has room for the pair, up to ``GRADE_EXTRA_MAX``. The coarse graph's points are the
     vertices and fine points 1, 3, ... (0-based) of every edge, in the same edge order (both from
-    np.unique of the same sorted edges)."""
+    np.unique of the same sorted edges). ``lengths`` (m,3): ``F`` is an intrinsic triangulation with
+    these side lengths (``SteinerGraph``)."""
 
     def __init__(self, V, F, k, graded=False, lengths=None):
         if k < 3 or k % 2 == 0:
@@ -543,7 +547,9 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
     the sources exceeds ``PATH_WORST`` (a bound on the worst error), once more with the ``k`` (odd, at
     most ``k_max``, within ``PATH_BUDGET``) that the excess's fall as ``k^-STEINER_ORDER`` predicts for
     0.8 of the target (and of ``PATH_WORST``); the refined answer is kept only if its estimate is
-    not above the first one's. ``fit_grading``: start from ``graded_k(k)`` instead of ``k``, and refine
+    not above the first one's. Vertex sources search the intrinsic Delaunay triangulation where the
+    mesh's triangles are thin (``path_triangulation``; its graphs kept in ``cache['intrinsic']``).
+    ``fit_grading``: start from ``graded_k(k)`` instead of ``k``, and refine
     a fully graded graph only as far as its full grading fits (off: ``k`` as given). ``cache``: a dict
     kept by the caller between searches of the same ``V``, ``F``: it keeps the graphs of every ``k``
     used (built once, then each search is two Dijkstra runs), the mean edge and the edge count, the
