@@ -133,6 +133,14 @@ def _face_height(P):
     return z
 
 
+def _compact(V, F):
+    """``(V[used], F)`` renumbered: the vertices of no triangle dropped."""
+    used = np.unique(F)
+    new = np.full(len(V), -1, np.int64)
+    new[used] = np.arange(len(used))
+    return V[used], new[F]
+
+
 def _ccw(P, F):
     """The triangles ``F`` (m,3) turned counter-clockwise in the plane of the points ``P`` (k,2)."""
     A = (P[F[:, 1], 0] - P[F[:, 0], 0]) * (P[F[:, 2], 1] - P[F[:, 0], 1]) - \
@@ -174,11 +182,8 @@ def scan_like(name):
         C = P[F].mean(1)
         eye = ((C[:, 0] - 0.35) ** 2 + (C[:, 1] - 0.3) ** 2 < 0.012) | \
             ((C[:, 0] + 0.35) ** 2 + (C[:, 1] - 0.3) ** 2 < 0.012)
-        F = F[~eye]
-        used = np.unique(F)
-        remap = np.full(len(P), -1)
-        remap[used] = np.arange(len(used))
-        P, F = P[used], _ccw(P[used], remap[F])
+        P, F = _compact(P, F[~eye])
+        F = _ccw(P, F)
         return np.c_[P, _face_height(P) + rng.normal(scale=0.002, size=len(P))], F
     return None
 
@@ -205,7 +210,4 @@ def hull_part(kind='cylinder', n=6000, seed=1, p=16.0):
     # wound by qhull's outward facet normals (a sliver's own cross product can point either way)
     N = np.cross(X[F[:, 1]] - X[F[:, 0]], X[F[:, 2]] - X[F[:, 0]])
     F = np.where(((N * hull.equations[:, :3]).sum(1) < 0)[:, None], F[:, [0, 2, 1]], F)
-    used = np.unique(F)
-    new = np.full(n, -1, np.int64)
-    new[used] = np.arange(len(used))
-    return X[used], new[F]
+    return _compact(X, F)

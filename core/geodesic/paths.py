@@ -455,6 +455,17 @@ def graded_fit(n_faces, n_edges, need, k_max, k_min=PATH_K[-1]):
                  if grading_room(n_faces, n_edges, j) >= need), None)
 
 
+def full_grading(V, F, lengths=None):
+    """The grading every thin triangle of ``F`` (m,3) asks for, with no budget: ``(ue, inv, amin, full)``
+    (``mesh_edges``, ``edge_corner_angles`` and ``edge_grading`` of vertices ``V`` (n,3), or of the
+    triangles' side ``lengths`` (m,3) of an intrinsic triangulation). ``grade_extra(full, inv)`` is
+    what it adds to the graphs' links."""
+    F = np.asarray(F, np.int64)
+    ue, inv = mesh_edges(F)
+    amin = edge_corner_angles(V, F, inv, len(ue), lengths)
+    return ue, inv, amin, edge_grading(V, F, ue, inv, np.inf, amin)
+
+
 def graded_k(V, F, k, cache=None, lengths=None):
     """The Steiner points per edge to build for a requested ``k`` (odd) on the triangles ``F`` (m,3)
     (vertices ``V`` (n,3)): ``k``; or, where its graphs would leave thin triangles over ``SHORT_AREA``
@@ -470,9 +481,7 @@ def graded_k(V, F, k, cache=None, lengths=None):
     if k in got:
         return got[k]
     F = np.asarray(F, np.int64)
-    ue, inv = mesh_edges(F)
-    amin = edge_corner_angles(V, F, inv, len(ue), lengths)
-    full = edge_grading(V, F, ue, inv, np.inf, amin)
+    ue, inv, amin, full = full_grading(V, F, lengths)
     need = grade_extra(full, inv)
     out = k
     if need > grading_room(len(F), len(ue), k):
@@ -504,8 +513,8 @@ def path_triangulation(V, F, cache=None):
     from ..mesh.intrinsic import intrinsic_delaunay
     from ..mesh.repair import oriented_faces
     out = None
-    ue, inv = mesh_edges(F)
-    need = grade_extra(edge_grading(V, F, ue, inv, np.inf), inv)
+    _, inv, _, full = full_grading(V, F)
+    need = grade_extra(full, inv)
     if need > GRADE_EXTRA:
         try:
             # flips need one winding; a distance does not depend on it (triangles wound the wrong way
@@ -515,9 +524,8 @@ def path_triangulation(V, F, cache=None):
             T = None
         lengths = None if T is None else T.l
         if T is not None and T.report['flips'] and np.isfinite(lengths).all():
-            ue2, inv2 = mesh_edges(T.F)
-            amin = edge_corner_angles(V, T.F, inv2, len(ue2), lengths)
-            if grade_extra(edge_grading(V, T.F, ue2, inv2, np.inf, amin), inv2) < need:
+            _, inv2, _, full2 = full_grading(V, T.F, lengths)
+            if grade_extra(full2, inv2) < need:
                 out = (T.F, lengths)
     cache['triangulation'] = out
     return out
