@@ -273,3 +273,39 @@ def cylinder_hull(n=3000, seed=1):
     the benchmark's. Returns ``V`` (k,3), ``F`` (m,3)."""
     from core.surfaces import hull_part
     return hull_part('cylinder', n, seed)
+
+
+def with_coincident_vertices(V, F, count=100, seed=0):
+    """``V``, ``F`` (a closed or open manifold mesh) with ``count`` vertices doubled where a mesher
+    leaves them (marching cubes does, thousands of times): for an interior edge (a, b) with faces
+    (a, b, c) and (b, a, d), a new vertex a' at a's point takes a's place in those two faces, and the
+    zero-area triangles (a', c, a) and (a, d, a') close the gap, joined by the zero-length edge a a'.
+    The edges are chosen with no vertex in common. Returns ``V2`` (n + k,3), ``F2`` (m + 2k,3) and
+    ``twin`` (k,): the vertex a each new one copies."""
+    rng = np.random.default_rng(seed)
+    F = np.array(F, np.int64)
+    m = len(F)
+    H = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    third = np.concatenate([F[:, 2], F[:, 0], F[:, 1]])
+    face = np.tile(np.arange(m), 3)
+    key = {(a, b): (f, c) for (a, b), f, c in zip(H.tolist(), face.tolist(), third.tolist())}
+    used = np.zeros(len(V), bool)
+    Vn, Fn, twin = [np.asarray(V, np.float64)], [], []
+    n = len(V)
+    for i in rng.permutation(len(H)).tolist():
+        a, b = H[i]
+        if (b, a) not in key:
+            continue
+        (f1, c), (f2, d) = key[(a, b)], key[(b, a)]
+        if used[[a, b, c, d]].any():
+            continue
+        used[[a, b, c, d]] = True
+        F[f1][F[f1] == a] = n
+        F[f2][F[f2] == a] = n
+        Fn += [[n, c, a], [a, d, n]]
+        twin.append(a)
+        n += 1
+        if len(twin) == count:
+            break
+    twin = np.array(twin, np.int64)
+    return np.vstack(Vn + [np.asarray(V)[twin]]), np.vstack([F, np.array(Fn, np.int64)]), twin

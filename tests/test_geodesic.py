@@ -984,6 +984,37 @@ def test_surface_paths_search_the_intrinsic_delaunay_triangulation_of_slivers():
     assert cache['triangulation'] is not None and np.allclose(dw, d, rtol=1e-12)
 
 
+def test_surface_paths_merge_coincident_vertices_before_flipping():
+    """A mesher that leaves the same point twice, joined by an edge of zero length and two zero-area
+    triangles (marching cubes does, thousands of times): the intrinsic flips around such an edge
+    gave a marching-cubes part 0.3-1.4 % mean errors under estimates of 0.1 %. The coincident
+    vertices are merged first (``coincident_roots``): on the sliver cylinder with 535 doubled vertices
+    the paths stay within the target against the unrolled helix (without the merge 0.17 % mean, and
+    refinement stopped at k = 5), and each copy gets its twin's distance."""
+    from core.geodesic import paths
+    from meshgen import cylinder_hull, with_coincident_vertices
+    V0, F0 = cylinder_hull(3000)
+    V, F, twin = with_coincident_vertices(V0, F0, 2000)
+    assert len(twin) > 500
+    from core.mesh.repair import coincident_roots
+    root = coincident_roots(V, F)
+    assert np.array_equal(root[len(V0):], twin) and np.array_equal(root[:len(V0)], np.arange(len(V0)))
+    z, th = V[:, 2], np.arctan2(V[:, 1], V[:, 0])
+    s = int(np.argmin(np.abs(z) + np.abs(th)))
+    exact = np.hypot(0.5 * np.abs((th - th[s] + np.pi) % (2 * np.pi) - np.pi), z - z[s])
+    side = (np.abs(z) < 0.6) & (exact > 0.05)
+    cache = {}
+    d, est, k = paths.surface_paths(V, F, [s], 9, target=1e-3, cache=cache)
+    assert cache['triangulation'] is not None and cache['triangulation'][2] is not None
+    e = np.abs(d[side] - exact[side]) / exact[side]
+    assert e.mean() < 1e-3 and e.max() < 0.02 and est >= e.mean(), (e.mean(), e.max(), est, k)
+    assert np.array_equal(d[len(V0):], d[twin])
+    # a source on a copy is its twin
+    d2, _, _ = paths.surface_paths(V, F, [len(V0)], 9, cache=cache)
+    d1, _, _ = paths.surface_paths(V, F, [int(twin[0])], 9, cache=cache)
+    assert np.array_equal(d1, d2)
+
+
 def test_surface_paths_refine_without_starving_their_needles(monkeypatch):
     """Refining toward the target builds a graph with more points per edge within the same link budget.
     On a scan whose rim stands vertical (needles) a larger ``k`` can leave the needles fewer graded

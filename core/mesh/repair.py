@@ -214,3 +214,25 @@ def oriented_faces(V, F):
     turn = R.face_map[R.flipped]
     F[turn] = F[turn][:, ::-1]
     return F
+
+
+def coincident_roots(V, F):
+    """``root`` (n,): for the vertices ``V`` (n,3) of the triangles ``F`` (m,3), the lowest-numbered
+    vertex at the same point reached through edges of zero length (``degenerate_faces``' tolerance),
+    each vertex itself otherwise; or None if no edge has zero length (a marching-cubes mesh has
+    thousands: the same point twice, joined by an edge)."""
+    from .validate import degenerate_faces
+    deg = degenerate_faces(V, F)
+    if not deg.any():
+        return None
+    E = np.concatenate([F[deg][:, [0, 1]], F[deg][:, [1, 2]], F[deg][:, [2, 0]]])
+    tol = 1e-12 * float(np.linalg.norm(V[F[:, 1]] - V[F[:, 0]], axis=1).mean())
+    E = E[np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1) <= tol]
+    if not len(E):
+        return None
+    n = len(V)
+    G = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    _, label = connected_components(G, directed=False)
+    root = np.full(n, n, np.int64)
+    np.minimum.at(root, label, np.arange(n))            # the lowest vertex of each group, by label
+    return root[label]
