@@ -111,6 +111,7 @@ def sphere_object(context, obj, moebius='UNIFORM', bake=True, colormap=None):
             'seconds': {'map': round(t_map, 4), 'write': round(t_write, 4),
                         'total': round(time.perf_counter() - t0, 4)},
             'core_seconds': core.get('seconds'),
+            'repairs': core.get('repairs', []),
         }
         meshio.store_report(me, REPORT_KEY, report)
     return report
@@ -123,6 +124,9 @@ def summary_line(r):
         parts.append("baselines " + ", ".join(f"{k} {v:.3g}" for k, v in r['baselines'].items()))
     parts += [f"{r['flips']} sphere flips", f"{r['uv_flips']} UV flips", f"qc mean {r['qc_mean']:.4f}",
               f"{r['seconds']['total']:.2f} s"]
+    if r.get('repairs'):        # done on an internal copy: the mesh itself is not changed
+        parts.append("repaired internally: " + ", ".join(f"{x['count']} {x['repair'].replace('_', ' ')}"
+                                                         for x in r['repairs']))
     return ', '.join(parts)
 
 

@@ -141,6 +141,45 @@ def test_open_mesh_error_leaves_data(addon, bl):
     assert bpy.types.VIEW3D_PT_conformal_sphere.poll(bpy.context)
 
 
+def test_messy_closed_meshes_are_mapped_on_a_repaired_copy(addon, bl):
+    """The cow (two fans touching at one vertex) and a blob with a loose vertex and doubled vertices
+    (zero-length edges) are mapped, not refused: the repairs are made on the core's copy and named
+    in the report and the summary, the mesh keeps its geometry, and every vertex (the loose one
+    too) gets a finite point of the Sphere key. The cow's thin tail is a poor sphere map: WARNING."""
+    import os
+    import sys
+    sys.path.insert(0, os.path.dirname(__file__))
+    from meshgen import with_coincident_vertices
+    from conformal_flatten.core.io.obj import read_obj
+    from conformal_flatten.addon.ops_sphere import summary_line
+    m = read_obj(os.path.join(os.path.dirname(__file__), 'data', 'cow.obj'))
+    cow = bl.mesh_object('cow', m.V, m.corner_verts.reshape(-1, 3))
+    before = bl.mesh_snapshot(cow.data)
+    assert bpy.ops.uv.conformal_sphere() == {'FINISHED'}
+    rep = addon.addon.meshio.load_report(cow.data, 'conformal_sphere_report')
+    assert [r['repair'] for r in rep['repairs']] == ['vertices_split'] and rep['warnings']
+    assert 'repaired internally: 1 vertices split' in summary_line(rep)
+    key = np.empty(len(m.V) * 3, np.float32)
+    cow.data.shape_keys.key_blocks['Sphere'].data.foreach_get('co', key)
+    assert np.isfinite(key).all()
+    basis = np.empty(len(m.V) * 3, np.float32)
+    cow.data.shape_keys.key_blocks['Basis'].data.foreach_get('co', basis)
+    np.testing.assert_allclose(basis.reshape(-1, 3), m.V, atol=1e-5)
+    assert bl.mesh_snapshot(cow.data)['#counts'] == before['#counts']
+    _, V, F = closed_object(bl, freq=5)
+    V2, F2, twin = with_coincident_vertices(V, F, 20, seed=1)
+    V3 = np.vstack([V2, [[3.0, 0.0, 0.0]]])
+    obj = bl.mesh_object('messy', V3, F2)
+    assert bpy.ops.uv.conformal_sphere() == {'FINISHED'}
+    rep = addon.addon.meshio.load_report(obj.data, 'conformal_sphere_report')
+    counts = {r['repair']: r['count'] for r in rep['repairs']}
+    assert counts == {'coincident_vertices_merged': 20, 'loose_vertices_ignored': 1}, counts
+    assert rep['flips'] == 0 and not rep['warnings']
+    unit = attr(obj.data, 'sphere_position', 'vector', 3)
+    assert np.isfinite(unit).all() and np.allclose(unit[len(V):len(V2)], unit[twin])
+    assert len(obj.data.vertices) == len(V3) and len(obj.data.polygons) == len(F2)
+
+
 def test_torus_error(addon, bl):
     n, k = 16, 8
     i, j = np.meshgrid(np.arange(n), np.arange(k), indexing='ij')

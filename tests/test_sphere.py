@@ -165,6 +165,43 @@ def test_bad_input():
         sphere_map(V, F, moebius='best')
 
 
+def test_sphere_map_repairs_messy_closed_meshes():
+    """Messy input is mapped where an answer exists, on a repaired copy (as unwrap repairs it), with
+    the repairs listed and the user's arrays untouched: a loose vertex, a duplicate face, a face with
+    a repeated vertex and doubled vertices (zero-length edges with zero-area triangles, as marching
+    cubes leaves them) give the clean blob's map; ``S`` and ``mu`` come back in the input's numbering.
+    The cow (tests/data), two fans touching at one vertex, maps once the vertex is split; its thin
+    tail shrinks to almost nothing on the sphere, and the report says how poor that is."""
+    sys.path.insert(0, os.path.dirname(__file__))
+    from meshgen import with_coincident_vertices
+    from core.io.obj import read_obj
+    V, F = blob(6)
+    clean = sphere_map(V, F)
+    V2, F2, twin = with_coincident_vertices(V, F, 40, seed=2)
+    V3 = np.vstack([V2, [[5.0, 5.0, 5.0]]])                     # a loose vertex
+    F3 = np.vstack([F2, F2[:1, ::-1], [[0, 0, 1]]])             # a duplicate face, a repeated vertex
+    before = (V3.copy(), F3.copy())
+    res = sphere_map(V3, F3)
+    assert np.array_equal(V3, before[0]) and np.array_equal(F3, before[1])
+    counts = {r['repair']: r['count'] for r in res.report['repairs']}
+    assert counts == {'coincident_vertices_merged': 40, 'loose_vertices_ignored': 1,
+                      'duplicate_faces_dropped': 1, 'degenerate_faces_dropped': 1}, counts
+    assert res.S.shape == V3.shape and np.allclose(np.linalg.norm(res.S, axis=1), 1.0)
+    assert res.report['flips'] == 0 and not res.report['warnings']
+    assert abs(res.report['mu_ratio'] / clean.report['mu_ratio'] - 1) < 0.01
+    assert np.array_equal(res.S[len(V):len(V2)], res.S[twin])          # a copy sits on its twin
+    assert res.mu.shape == (len(F3),) and np.isnan(res.mu[-1]) and res.mu[-2] == res.mu[0]
+    assert np.isfinite(res.mu[:len(F)]).all() and np.isnan(res.mu[len(F):len(F2)]).all()
+    m = read_obj(os.path.join(os.path.dirname(__file__), 'data', 'cow.obj'))
+    Vc, Fc = m.V, m.corner_verts.reshape(-1, 3)
+    cow = sphere_map(Vc, Fc)
+    r = cow.report
+    assert [x['repair'] for x in r['repairs']] == ['vertices_split']
+    assert np.isfinite(cow.S).all() and cow.S.shape == Vc.shape
+    assert r['warnings'] and r['mu_ratio'] < 1e-6
+    assert len(r['flipped_faces']) == r['flips'] and all(0 <= f < len(Fc) for f in r['flipped_faces'])
+
+
 def test_tiny_meshes():
     for k in (1, 2):
         V, F = icosphere(k)

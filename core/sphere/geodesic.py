@@ -12,7 +12,7 @@ from ..geodesic.paths import PATH_K, PATH_K_MAX, path_points, surface_paths, thi
 from ..geodesic.solver import ERROR_TARGET, error_estimate, mu_spread
 from ..mesh.topology import unique_edges
 from ..mesh.validate import check_mesh
-from .map import sphere_map
+from .map import _repaired, sphere_map
 
 # --- geodesic distances through the sphere ----------------------------------------------------------
 # Two stereographic charts, each a regular grid: N (w = (x + i y) / (1 + z), the north pole at 0) and
@@ -255,6 +255,24 @@ def default_sphere_grid(n_vertices):
     return int(np.clip(64 * np.ceil(4.0 * np.sqrt(n_vertices) / 64), 256, 768))
 
 
+def _on_repaired(fixed, V, src, S, **options):
+    """``sphere_geodesic`` of the input mesh (vertices ``V`` (n,3)) answered on its repaired copy
+    ``fixed`` (``core.mesh.repair.Repaired``): every wedge of a source vertex is a source, an input
+    vertex takes the nearest of its wedges' distances (inf for a loose vertex, in no face), ``S`` (n,3)
+    in the input's numbering is carried over, and ``report['repairs']`` lists the repairs."""
+    loose = np.setdiff1d(src, fixed.vert_map)
+    if len(loose):
+        raise ConformalError(f"source vertex {int(loose[0])} is in no face (a loose vertex): choose a "
+                             "vertex of the surface")
+    wedges = np.flatnonzero(np.isin(fixed.vert_map, src))
+    S2 = None if S is None else np.asarray(S, np.float64)[fixed.vert_map]
+    d2, report = sphere_geodesic(fixed.V, fixed.F, wedges, S=S2, **options)
+    d = np.full(len(V), np.inf)
+    np.minimum.at(d, fixed.vert_map, d2)
+    report['repairs'] = list(fixed.repairs) + report.get('repairs', [])
+    return d, report
+
+
 def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver='auto',
                     overlap=GEO_OVERLAP_DEG, source_radius=8.0, progress=None, method='auto'):
     """Geodesic distances on a closed genus-0 mesh: shortest surface paths whenever they fit their
@@ -293,16 +311,18 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     t0 = time.perf_counter()
     V = np.asarray(V, np.float64)
     F = np.asarray(F, np.int64)
-    if S is None:
-        # a distance does not depend on a triangle's winding: faces wound the wrong way are turned
-        from ..mesh.repair import oriented_faces
-        F = oriented_faces(V, F)
     n = len(V)
     src = np.atleast_1d(np.asarray(sources))
     if src.size == 0:
         raise ConformalError("no source given: pass at least one source vertex")
     if not np.issubdtype(src.dtype, np.integer) or src.min() < 0 or src.max() >= n:
         raise ConformalError(f"source vertices must be indices in 0..{n - 1}")
+    # a distance does not depend on a triangle's winding: faces wound the wrong way are turned; a
+    # messy mesh is answered on its repaired copy, as ``sphere_map`` maps it (``_repaired``)
+    F, fixed = _repaired(V, F)
+    if fixed is not None:
+        return _on_repaired(fixed, V, src, S, moebius=moebius, grid=grid, solver=solver, overlap=overlap,
+                            source_radius=source_radius, progress=progress, method=method)
     if method not in GEO_METHODS:
         raise ConformalError(f"method must be one of {', '.join(GEO_METHODS)}, got {method!r}")
     if not 5.0 <= overlap <= 60.0:
@@ -312,7 +332,7 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     direct = method == 'paths' or (method == 'auto' and k is not None and k >= 5)
     if S is None and direct:
         # the paths need no sphere map: only the input check that mapping would make
-        check_mesh(V, F, kind='sphere')
+        check_mesh(V, F, kind='sphere', allow_degenerate=True)
     elif S is None:
         say(0.0, 'mapping to the sphere')
         res = sphere_map(V, F, moebius=moebius)

@@ -27,6 +27,7 @@ import numpy as np
 
 from ..mesh.geometry import face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
+from ..mesh.validate import degenerate_faces
 from .map import from_sphere, to_sphere
 
 POLE_TOL = 1e-12          # |(x, y)| below this on the unit sphere: the vertex sits at a pole
@@ -87,11 +88,13 @@ def pole_candidates(S: np.ndarray, F: np.ndarray, k: int = POLE_TRIES) -> list:
 
 
 def spherical_uv(X: np.ndarray, corner_verts: np.ndarray, sizes: np.ndarray,
-                 tri_corners: np.ndarray | None = None) -> tuple:
+                 tri_corners: np.ndarray | None = None, counted: np.ndarray | None = None) -> tuple:
     """Per-corner UVs (c,2) of the unit-sphere positions ``X`` (n,3) (poles on vertices, see
     ``layout_sphere``) for polygons given by ``corner_verts`` (c,) and ``sizes`` (p,) (corners listed
     polygon by polygon), following the module docstring. ``tri_corners`` (t,3) optional: triangles of
-    the polygons as corner indices, for the flip count (default: every polygon is a triangle).
+    the polygons as corner indices, for the flip count (default: every polygon is a triangle);
+    ``counted`` (t,) bool optional: the triangles the flip count looks at (a zero-area triangle has no
+    orientation to lose).
 
     Returns ``(uv (c,2) in [0,1], info)``; ``info`` has ``uv_flips`` (triangles with nonpositive signed
     UV area), ``pole_polygons`` (polygons whose corners wind around a pole: 0 when the poles are
@@ -143,7 +146,8 @@ def spherical_uv(X: np.ndarray, corner_verts: np.ndarray, sizes: np.ndarray,
     uv = np.stack([np.clip(u, 0.0, 1.0), v], 1)
     if tri_corners is None:
         tri_corners = np.arange(nc).reshape(-1, 3)
-    flips = int((signed_uv_areas(uv, np.asarray(tri_corners, np.int64)) <= 0).sum())
+    flipped = signed_uv_areas(uv, np.asarray(tri_corners, np.int64)) <= 0
+    flips = int((flipped if counted is None else flipped & counted).sum())
     return uv, {'uv_flips': flips, 'pole_polygons': int(encl.sum()), 'u_scale': float(scale),
                 'pole_corners': int(pole_c.sum())}
 
@@ -169,11 +173,12 @@ def sphere_layout(V: np.ndarray, F: np.ndarray, S: np.ndarray, mu: np.ndarray, c
     S = np.asarray(S, np.float64)
     S = S / np.linalg.norm(S, axis=1)[:, None]
     best = None
+    counted = ~degenerate_faces(V, F)                  # zero-area triangles have no side to flip to
     for north in pole_candidates(S, F):
         unit = S @ pole_rotation(S, north).T
         unit[north] = (0.0, 0.0, 1.0)
         X, south = layout_sphere(unit)
-        loop_uv, info = spherical_uv(X, corner_verts, sizes, tri_corners)
+        loop_uv, info = spherical_uv(X, corner_verts, sizes, tri_corners, counted)
         if best is None or info['uv_flips'] < best[3]['uv_flips']:
             best = (north, south, unit, info, loop_uv)
         if info['uv_flips'] == 0:

@@ -75,7 +75,7 @@ from ..mesh.measures import summarise
 from .moebius import MOEBIUS_MODES, optimise
 from ..mesh.solve import Factor
 from ..mesh import topology
-from ..mesh.validate import check_arrays, check_mesh, DEFAULT_MAX_FACES
+from ..mesh.validate import check_arrays, check_mesh, degenerate_faces, DEFAULT_MAX_FACES
 
 
 @dataclass
@@ -371,6 +371,63 @@ def sphere_warnings(report: dict) -> list:
     return out
 
 
+def _repaired(V, F):
+    """The mesh to map: ``(F2, fixed)``. A mesh that needs at most some faces turned keeps its
+    vertices: ``F2`` is ``F`` (m,3) with those faces turned (``oriented_faces``) and ``fixed`` None, so
+    that a clean mesh keeps its map to the bit. Otherwise ``fixed`` is ``core.mesh.repair.repair``'s
+    copy (vertices at one point joined by an edge of zero length merged, ``coincident_roots``; loose
+    vertices, repeated-vertex and duplicate faces left out; non-manifold vertices and edges split) and
+    ``F2`` its faces."""
+    from ..mesh.repair import coincident_roots, repair
+    root = coincident_roots(V, F)
+    R = repair(V, F if root is None else root[F])
+    if root is None and {r['repair'] for r in R.repairs} <= {'faces_reoriented'}:
+        if not R.flipped.any():
+            return F, None
+        F2 = np.array(F, np.int64)
+        turn = R.face_map[R.flipped]
+        F2[turn] = F2[turn][:, ::-1]
+        return F2, None
+    if root is not None:
+        # the merge's own leftovers are not the input's: its collapsed faces and merged vertices
+        merged = int((root != np.arange(len(V))).sum())
+        collapsed = int(((root[F][:, 0] == root[F][:, 1]) | (root[F][:, 1] == root[F][:, 2]) |
+                         (root[F][:, 2] == root[F][:, 0])).sum() -
+                        ((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])).sum())
+        less = {'loose_vertices_ignored': merged, 'degenerate_faces_dropped': collapsed}
+        kept = []
+        for r in R.repairs:
+            count = r['count'] - less.get(r['repair'], 0)
+            if count > 0:
+                kept.append(dict(r, count=count))
+        R.repairs = [{'repair': 'coincident_vertices_merged', 'count': merged,
+                      'note': 'vertices at the same point, joined by an edge of zero length, are merged '
+                              'and their zero-area triangles left out'}] + kept
+    return R.F, R
+
+
+def _to_input(fixed, S, mu, V_in, m_in):
+    """The map of the repaired mesh ``fixed`` (``Repaired``) in the input's numbering: ``S`` (n_in,3),
+    each input vertex at its first wedge's point, a loose vertex (in no face) at the point of the
+    nearest vertex in 3D; ``mu`` (m_in,) per input face, a dropped duplicate face taking its twin's,
+    NaN for a face left out with a repeated vertex or zero area."""
+    n_in = len(V_in)
+    S_in = np.full((n_in, 3), np.nan)
+    S_in[fixed.vert_map[::-1]] = S[::-1]               # the first wedge of each vertex wins
+    loose = np.flatnonzero(np.isnan(S_in[:, 0]))
+    if len(loose):
+        from scipy.spatial import cKDTree
+        used = np.flatnonzero(~np.isnan(S_in[:, 0]))
+        near = cKDTree(V_in[used]).query(V_in[loose])[1]
+        S_in[loose] = S_in[used[near]]
+    mu_in = np.full(m_in, np.nan)
+    mu_in[fixed.face_map] = mu
+    twin = fixed.twin_of_dropped
+    dup = twin >= 0
+    mu_in[fixed.dropped[dup]] = mu_in[twin[dup]]
+    return S_in, mu_in
+
+
 def sphere_map(V: np.ndarray, F: np.ndarray, moebius: str = 'uniform', max_faces: int = DEFAULT_MAX_FACES,
                progress=None, **options) -> SphereResult:
     """Map a closed genus-0 triangle mesh conformally to the unit sphere and choose the Moebius
@@ -379,42 +436,60 @@ def sphere_map(V: np.ndarray, F: np.ndarray, moebius: str = 'uniform', max_faces
     ``core.sphere.moebius.optimise``. Returns ``SphereResult``; its report has the measures (``flips``
     are folds of the sphere map), the Moebius info (``baselines``, ``moebius_converged``, ...), the
     map's info (``conformal_sphere``) and ``warnings`` (list of str, ``sphere_warnings``: empty only
-    for a clean result). Raises ``ConformalError`` on bad input (open mesh, higher genus, degenerate
-    faces...)."""
+    for a clean result). Messy input is repaired on a copy and the repairs listed in ``report['repairs']``
+    (``_repaired``); ``S`` and ``mu`` are in the input's numbering. Raises ``ConformalError`` on input
+    with no answer (an open mesh, higher genus, several parts)."""
     if moebius not in MOEBIUS_MODES:
         raise ConformalError(f"unknown Moebius mode {moebius!r}: use one of {', '.join(MOEBIUS_MODES)}")
     report_progress = progress or (lambda f, msg: None)
     t0 = time.perf_counter()
-    V, F0 = check_arrays(V, F, max_faces=max_faces)
-    # faces wound the wrong way are turned (the map is per vertex; the sphere needs one orientation)
-    from ..mesh.repair import oriented_faces
-    F = oriented_faces(V, F0)
-    check_mesh(V, F, kind='sphere', max_faces=max_faces)
-    turned = int((F != F0).any(1).sum()) if F is not F0 else 0
+    V_in, F_in = check_arrays(V, F, max_faces=max_faces)
+    # messy input is repaired on a copy (``core.mesh.repair``): faces wound the wrong way are turned,
+    # loose vertices, repeated-vertex and duplicate faces left out, non-manifold vertices and edges
+    # split; zero-area triangles are kept (the mollified metric handles them) and left out of the
+    # measures and of the Moebius objective
+    F, fixed = _repaired(V_in, F_in)
+    V = V_in if fixed is None else fixed.V
+    turned = int((F != F_in).any(1).sum()) if fixed is None else 0
+    check_mesh(V, F, kind='sphere', max_faces=max_faces, allow_degenerate=True)
+    real = ~degenerate_faces(V, F)
     timings = {'check': time.perf_counter() - t0}
     t = time.perf_counter()
     S, info = conformal_sphere(V, F, progress=lambda f, m: report_progress(0.5 * f, m))
     timings['map'] = time.perf_counter() - t
     t = time.perf_counter()
     A = face_areas(V, F)
-    S, minfo = optimise(S, F, A, mode=moebius,
+    S, minfo = optimise(S, F[real], A[real], mode=moebius,
                         progress=lambda f, m: report_progress(0.5 + 0.45 * f, m), **options)
     timings['moebius'] = time.perf_counter() - t
     report_progress(0.95, 'measuring')
-    meas, (mu, qc, flipped) = sphere_measures(V, F, S, per_face=True)
-    report = {'moebius': moebius, 'vertices': len(V), 'faces': len(F)}
+    meas, (mu_r, qc, flipped) = sphere_measures(V, F[real], S, per_face=True)
+    report = {'moebius': moebius, 'vertices': len(V_in), 'faces': len(F_in)}
     report.update(meas)
-    report['flipped_faces'] = np.nonzero(flipped)[0].tolist()
+    faces_r = np.flatnonzero(real)                       # the measured triangles of F
+    mu = np.full(len(F), np.nan)
+    mu[faces_r] = mu_r
+    if fixed is None:
+        report['flipped_faces'] = faces_r[flipped].tolist()
+    else:
+        report['flipped_faces'] = np.unique(fixed.face_map[faces_r[flipped]]).tolist()
+        S, mu = _to_input(fixed, S, mu, V_in, len(F_in))
     if flipped.any() and not flipped.all():
-        report['mu_ratio_oriented'] = float(mu[~flipped].min() / mu[~flipped].max())
+        report['mu_ratio_oriented'] = float(mu_r[~flipped].min() / mu_r[~flipped].max())
     report['moebius_point'] = [round(x, 9) for x in minfo['c']]
     for k in ('baselines', 'converged', 'evaluations', 'guarded_faces'):
         if k in minfo:
             report['moebius_' + k if k != 'baselines' else k] = minfo[k]
     report.update({k: v for k, v in info.items()})
+    repairs = [] if fixed is None else list(fixed.repairs)
     if turned:
-        report['repairs'] = [{'repair': 'faces_reoriented', 'count': turned,
-                              'note': 'faces turned to agree with their neighbours'}]
+        repairs.append({'repair': 'faces_reoriented', 'count': turned,
+                        'note': 'faces turned to agree with their neighbours'})
+    if not real.all():
+        from ..mesh.repair import zero_area_note
+        repairs.append(zero_area_note(int((~real).sum())))
+    if repairs:
+        report['repairs'] = repairs
     report['warnings'] = sphere_warnings(report)
     timings['total'] = time.perf_counter() - t0
     report['seconds'] = {k: round(v, 4) for k, v in timings.items()}
