@@ -206,6 +206,35 @@ def test_zero_area_triangles_are_handled_not_refused():
     assert 'warnings' in r and not r['warnings']
 
 
+def test_loose_vertices_are_left_out_not_refused(tmp_path):
+    """Vertices in no face (a scan's stray points) are left out of the map, as unwrap leaves them: the
+    map of the rest is the clean mesh's to the bit, their UVs are NaN, the repair is listed; the CLI
+    writes them a vt that no face uses and exits 0."""
+    import subprocess
+    import sys
+    from core.io.obj import write_obj
+    V, F = make_surface('bump', 17)
+    clean = flatten(V, F, boundary='uniform')
+    V2 = np.vstack([V[:5], [[9.0, 9.0, 9.0]], V[5:], [[np.nan, 0.0, 0.0]]])   # two loose, one NaN
+    F2 = np.where(F >= 5, F + 1, F)
+    res = flatten(V2, F2, boundary='uniform')
+    used = np.r_[0:5, 6:len(V2) - 1]
+    assert np.array_equal(res.uv[used], clean.uv) and np.isnan(res.uv[[5, -1]]).all()
+    assert np.array_equal(res.mu, clean.mu) and res.report['mu_ratio'] == clean.report['mu_ratio']
+    first = res.report['repairs'][0]
+    assert first['repair'] == 'loose_vertices_ignored' and first['count'] == 2
+    assert res.report['vertices'] == len(V2)
+    src, out = tmp_path / 'loose.obj', tmp_path / 'out.obj'
+    write_obj(str(src), V2[:-1], F2)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    run = subprocess.run([sys.executable, '-m', 'core', 'flatten', str(src), str(out)], cwd=root,
+                         capture_output=True, text=True)
+    assert run.returncode == 0 and 'loose_vertices_ignored (1)' in run.stderr, run.stderr
+    vt = np.array([line.split()[1:3] for line in out.read_text().splitlines() if line.startswith('vt ')],
+                  float)
+    assert vt.shape == (len(V2) - 1, 2) and np.isfinite(vt).all()
+
+
 def test_intrinsic_operators_do_not_regress_smooth_surfaces():
     """The intrinsic Delaunay Laplacian (auto) is at least as good as the mesh's own on edgebump."""
     V, F = make_surface('edgebump', 33)

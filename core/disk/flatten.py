@@ -319,13 +319,33 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     operators: 'auto' (intrinsic Delaunay operators where the mesh has non-Delaunay edges or needs
     mollification, docs/math.md), 'intrinsic' (always) or 'extrinsic' (the mesh's own cotan weights).
     Zero-area triangles are accepted: the intrinsic mollification gives them a valid metric, and they
-    are left out of the objective and the measures (``report['degenerate_faces']``).
+    are left out of the objective and the measures (``report['degenerate_faces']``). Loose vertices
+    (in no triangle) are left out: their UVs (and ``u``) are NaN, and ``report['repairs']`` says so.
     checked_loop: the boundary loop (k,) of a caller that has just run ``check_mesh`` on these very
     arrays with checks at least as strict as the disk check (``unwrap``'s disk dispatch); the checks
     are then not repeated. Extra ``options`` go to ``core.disk.uniform.optimise``.
     Returns ``FlattenResult``; ``report['warnings']`` (list of str) lists flips, qc_mean above 1.5,
     fallbacks; ``report['planar']`` says when the mesh lies in a plane (``planar_map``: its own
     coordinates are the map, no solve). Raises ``ConformalError`` on bad input."""
+    loose = _loose_vertices(V, F)
+    if loose is not None:
+        # vertices in no face take no part: the map of the rest, NaN UVs for them, the repair listed
+        used, remap = loose
+        res = flatten(np.asarray(V)[used], remap[np.asarray(F, np.int64)], boundary, fit, max_faces, bound,
+                      progress, real_faces, operators, None if checked_loop is None else
+                      remap[np.asarray(checked_loop, np.int64)], **options)
+        n = len(V)
+        uv = np.full((n, 2), np.nan)
+        uv[used] = res.uv
+        u = None
+        if res.u is not None:
+            u = np.full(n, np.nan)
+            u[used] = res.u
+        res.report['vertices'] = n
+        res.report['repairs'] = [{'repair': 'loose_vertices_ignored', 'count': int(n - len(used)),
+                                  'note': 'vertices in no face are left out (their UVs are NaN)'}] + \
+            res.report.get('repairs', [])
+        return FlattenResult(uv=uv, mu=res.mu, u=u, report=res.report)
     # LSCM has no maximum principle to restore and measures slightly worse on the intrinsic
     # triangulation of smooth grids (bench/flatten_table.py): 'auto' tries the mesh's own weights first
     first, second = ('extrinsic', 'intrinsic') if boundary == 'free' else ('auto', 'extrinsic')
@@ -341,6 +361,28 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
             alt.report['operators']['tried_first'] = {k: r[k] for k in ('flips', 'qc_mean', 'mu_ratio')}
             return alt
     return res
+
+
+def _loose_vertices(V, F):
+    """``(used (k,), remap (n,))`` of a mesh whose vertices ``V`` (n,3) include some in no triangle of
+    ``F`` (m,3) (loose vertices: the used ones in order, and each vertex's index among them, -1 if
+    loose), or None if every vertex is used or the arrays are not ones ``check_mesh`` accepts (it then
+    names what is wrong)."""
+    try:
+        F = np.asarray(F, np.int64)
+        n = len(V)
+        if F.ndim != 2 or F.shape[1] != 3 or not len(F) or F.min() < 0 or F.max() >= n:
+            return None
+    except (TypeError, ValueError):
+        return None
+    on = np.zeros(n, bool)
+    on[F.ravel()] = True
+    if on.all():
+        return None
+    used = np.flatnonzero(on)
+    remap = np.full(n, -1, np.int64)
+    remap[used] = np.arange(len(used))
+    return used, remap
 
 
 def _quality_key(r):
