@@ -1055,7 +1055,7 @@ def path_links_fit(paths, F, k, need):
     from core.mesh.topology import unique_edges
     ne = len(unique_edges(F)[0])
     base = paths.path_links(len(F), ne, k) + paths.path_links(len(F), ne, (k - 1) // 2)
-    return base * (1 + need) <= 0.9 * paths.PATH_BUDGET
+    return base * (1 + need) <= 0.9 * min(paths.PATH_BUDGET, paths.GRADE_BUDGET)
 
 
 def test_a_lifted_hemisphere_s_rim_sources_take_graded_refined_seeds():

@@ -122,7 +122,6 @@ class SteinerGraph:
     SPARE = 256   # link slots of the virtual source (a point in a triangle needs 3 + 3k of them)
 
     def __init__(self, V, F, k=STEINER, grade=None, edges=None, lengths=None):
-        import scipy.sparse as sp
         V = np.asarray(V, np.float64)
         F = np.asarray(F, np.int64)
         n = len(V)
@@ -178,21 +177,14 @@ class SteinerGraph:
             B.append(chain[:, 1:].ravel())
             if lengths is not None:
                 W.append(np.repeat(el[es] / (c + 1.0), c + 1))
-        a, b = np.concatenate(A), np.concatenate(B)
         N = len(pts)
-        w = np.concatenate(W) if lengths is not None else np.linalg.norm(pts[a] - pts[b], axis=1)
-        w = np.maximum(w, 1e-300)                                            # csgraph drops explicit zeros
         # the graph numbers its points along a Morton (Z-order) curve of their positions, so that the
         # rows Dijkstra relaxes one after another lie close in memory (spot, k = 9: 64 -> 54 ms a search
         # of this graph);
         # ``rank`` (N,) is each point's number in the graph
         self.rank = rank = morton_rank(pts)
-        a, b = rank[a], rank[b]
-        G = sp.coo_matrix((np.r_[w, w], (np.r_[a, b], np.r_[b, a])), shape=(N, N)).tocsr()
-        # the virtual source's row, appended by hand (a COO matrix would sum its repeated self-links)
-        self.G = sp.csr_matrix((np.r_[G.data, np.ones(self.SPARE)],
-                                np.r_[G.indices, np.full(self.SPARE, N, G.indices.dtype)],
-                                np.r_[G.indptr, G.indptr[-1] + self.SPARE]), shape=(N + 1, N + 1))
+        self.G = _link_matrix(A, B, W if lengths is not None else None, pts, rank, N, self.SPARE)
+        del A, B, W
         self.P, self.F, self.ue, self.inv, self.count, self.start, self.N = pts, F, ue, inv, count, start, N
         if grade is None:
             self.pid = start[:, None] + np.arange(k)[None]                    # (e,k)
@@ -263,6 +255,44 @@ class SteinerGraph:
             G = sp.csr_matrix((np.r_[G.data[:lo], wx], np.r_[G.indices[:lo], cand],
                                np.r_[G.indptr[:N + 1], lo + len(cand)]), shape=G.shape)
         return dijkstra(G, directed=True, indices=N)[rank]
+
+
+def _link_matrix(A, B, W, pts, rank, N, spare):
+    """The (N+1, N+1) CSR matrix of the links ``A[i] - B[i]`` (lists of index arrays into ``pts`` (N,3))
+    both ways, of lengths ``W`` (a list of arrays) or, if None, the 3D distances, over the points
+    numbered by ``rank`` (N,); its last row (the virtual source of ``search_from``) holds ``spare``
+    placeholder links. Built in 32-bit indices straight into one COO triple with the spare row, and
+    the lists emptied as they are copied: about 56 bytes a link at the peak (97 before, when the
+    spare row was appended to a finished matrix: the link budget's memory)."""
+    import scipy.sparse as sp
+    L = sum(len(a) for a in A)
+    itype = np.int32 if N + 1 < 2 ** 31 else np.int64
+    rows = np.empty(2 * L + spare, itype)
+    cols = np.empty(2 * L + spare, itype)
+    data = np.empty(2 * L + spare, np.float64)
+    at = 0
+    while A:
+        a, b = A.pop(0), B.pop(0)
+        w = W.pop(0) if W is not None else np.linalg.norm(pts[a] - pts[b], axis=1)
+        c = len(a)
+        ra, rb = rank[a], rank[b]
+        rows[at:at + c], cols[at:at + c] = ra, rb
+        rows[L + at:L + at + c], cols[L + at:L + at + c] = rb, ra
+        w = np.maximum(w, 1e-300)                                # csgraph drops explicit zeros
+        data[at:at + c], data[L + at:L + at + c] = w, w
+        at += c
+        del a, b, w, ra, rb
+    # the spare row: distinct columns (COO sums repeated entries) while the graph has that many points,
+    # each rewritten per search; a smaller graph's row is appended by hand
+    fits = N + 1 >= spare
+    rows[2 * L:] = N
+    cols[2 * L:] = np.arange(spare) if fits else N
+    data[2 * L:] = 1.0
+    if fits:
+        return sp.coo_matrix((data, (rows, cols)), shape=(N + 1, N + 1)).tocsr()
+    G = sp.coo_matrix((data[:2 * L], (rows[:2 * L], cols[:2 * L])), shape=(N, N)).tocsr()
+    return sp.csr_matrix((np.r_[G.data, np.ones(spare)], np.r_[G.indices, np.full(spare, N, G.indices.dtype)],
+                          np.r_[G.indptr, G.indptr[-1] + spare]), shape=(N + 1, N + 1))
 
 
 def morton_rank(P, bits=10):
@@ -404,9 +434,16 @@ EXTRAPOLATION_GAIN = 1.6
 # relief), against exact MMP, eight random sources and a three-source set each; 1.6 left two deepcap
 # sources at 0.103-0.110 % under estimates of 0.095 %.
 EXTRAPOLATION_GAIN_INTRINSIC = 1.35
+# The links ``grading_room`` measures the graded points' room against: the budget they were tuned with
+# (the twenty-first round). ``PATH_BUDGET`` grew with the graphs' leaner build; the grading's room did
+# not (that would change every needle mesh's graphs and times, unmeasured).
+GRADE_BUDGET = 12_000_000
 PATH_K = (9, 7, 5, 3)       # Steiner points per edge that ``surface_paths`` tries, best first (odd)
 PATH_K_MAX = 31            # the most Steiner points per edge ``surface_paths`` refines to for its target
-PATH_BUDGET = 12_000_000  # graph links (point pairs, both graphs) ``surface_paths`` may build; ~1 GB peak
+PATH_BUDGET = 20_000_000  # graph links (point pairs, both graphs) ``surface_paths`` may build: about
+# 57 bytes a link at the peak of building (``_link_matrix``), 31 kept, so ~1.1 GB. It was 12M at 97
+# bytes a link; on an 83k-triangle scan-like face (twice the relief) the paths then stopped at k = 5,
+# 0.19 % mean error (estimate 0.24 %); at 20M they take k = 7, 0.093 % (estimate 0.17 %)
 # (counted by ``path_links`` without the grading, which adds at most ``GRADE_EXTRA``, or what 0.9 of
 # the budget leaves, see ``SurfacePaths``)
 # ``surface_paths`` also refines when the plain paths' excess at some vertex beyond two mean edges of
@@ -443,9 +480,9 @@ def path_points(n_faces, n_edges, budget=None, k_min=PATH_K[-1], k_max=PATH_K[0]
 def grading_room(n_faces, n_edges, k):
     """The links ``edge_grading`` may add to the pair of graphs at ``k`` points per edge (a fraction of
     their ``k^2`` terms, as ``grade_extra`` counts them): ``GRADE_EXTRA``, or up to ``GRADE_EXTRA_MAX``
-    what 0.9 of ``PATH_BUDGET`` leaves over the uniform graphs."""
+    what 0.9 of ``PATH_BUDGET``, at most ``GRADE_BUDGET``, leaves over the uniform graphs."""
     base = path_links(n_faces, n_edges, k) + path_links(n_faces, n_edges, (k - 1) // 2)
-    return min(GRADE_EXTRA_MAX, max(GRADE_EXTRA, 0.9 * PATH_BUDGET / base - 1.0))
+    return min(GRADE_EXTRA_MAX, max(GRADE_EXTRA, 0.9 * min(PATH_BUDGET, GRADE_BUDGET) / base - 1.0))
 
 
 def graded_fit(n_faces, n_edges, need, k_max, k_min=PATH_K[-1]):
