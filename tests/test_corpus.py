@@ -117,8 +117,16 @@ def test_zero_area_faces_mollified():
     V = np.array(V, float)
     V[8] = V[1]                                        # coincident vertices: two zero-area faces
     res = unwrap(V, F, boundary='area')
-    assert any(x['repair'] == 'zero_area_faces_mollified' for x in res.report['repairs'])
+    assert any(x['repair'] == 'coincident_vertices_merged' for x in res.report['repairs'])
     assert res.report['flips'] == 0 and np.isfinite(res.uv).all()
+    # three different points on a line: kept, with a mollified metric
+    V, F = grid(7)
+    V = np.array(V, float)
+    a, b, c = F[10]
+    V[c] = 0.5 * (V[a] + V[b])
+    res = unwrap(V, F, boundary='area')
+    assert any(x['repair'] == 'zero_area_faces_mollified' for x in res.report['repairs'])
+    assert np.isfinite(res.uv).all()
 
 
 def test_nan_empty_and_size_limit_still_refused():

@@ -33,7 +33,7 @@ from ..mesh.geometry import face_areas
 from ..mesh.measures import (determinants, flip_warning, jacobians, signed_uv_areas, singular_values,
                              uv_measures)
 from ..mesh import topology
-from ..mesh.repair import repair, zero_area_note
+from ..mesh.repair import repair, repair_merged, zero_area_note
 from ..disk.flatten import QC_WARN, SCALE_REMEDY, scale_variation
 from .charts import split_overlaps
 from .repeats import Repeats
@@ -530,6 +530,24 @@ def _detach(V, F, bad, holes, boundary, desc, progress, options, depth, poly):
     return pieces
 
 
+def _merged_corners(F, Fout, rows, uv, vert_of, vert_island):
+    """Give the corners of the kept input triangles ``rows`` (``F`` (m,3) input vertices, ``Fout`` (m,3)
+    split vertices) that sit at a vertex merged into another (``repair_merged``) split vertices of
+    their own, at their root's UV in the same island, so that ``vert_of[Fout] == F``. Returns the
+    extended ``uv`` (N',2), ``vert_of`` (N',) and ``vert_island`` (N',); ``Fout`` is updated in place."""
+    C = Fout[rows]
+    want = F[rows]
+    off = vert_of[C] != want
+    if not off.any():
+        return uv, vert_of, vert_island
+    pairs, inv = np.unique(np.stack([C[off], want[off]], 1), axis=0, return_inverse=True)
+    new = len(vert_of) + np.arange(len(pairs))
+    C[off] = new[inv.ravel()]
+    Fout[rows] = C
+    return (np.vstack([uv, uv[pairs[:, 0]]]), np.r_[vert_of, pairs[:, 1]],
+            np.r_[vert_island, vert_island[pairs[:, 0]]])
+
+
 def _lowest_split_vertex(res_vert_of, n_in):
     """(n_in,) the lowest split vertex of every input vertex (-1 if it has none). The corners of a
     dropped face with a repeated vertex take these; a dropped duplicate takes its kept twin's."""
@@ -585,7 +603,7 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
         _seam_halfedges(F, n, seams, True)             # a seam that is no edge of F is an error
     # work in O(1) units whatever the mesh's (no under- or overflow); UVs are scaled back at the end
     V, unit = normalise_scale(V)
-    R = repair(V, F)
+    R, root = repair_merged(V, F)
     repairs = list(R.repairs)
     if edges is not None:
         loose_e = loose_edge_count(edges, F)
@@ -602,7 +620,8 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
         H2 = topology.halfedges(R.F)
         a, b = R.vert_map[H2[:, 0]], R.vert_map[H2[:, 1]]
         hk = np.minimum(a, b) * n + np.maximum(a, b)
-        sk = np.minimum(seams[:, 0], seams[:, 1]) * n + np.maximum(seams[:, 0], seams[:, 1])
+        sr = seams if root is None else root[seams]      # a seam at a merged vertex: at its root
+        sk = np.minimum(sr[:, 0], sr[:, 1]) * n + np.maximum(sr[:, 0], sr[:, 1])
         seams2 = np.unique(np.sort(H2[np.isin(hk, sk)], axis=1), axis=0)
     else:
         seams2 = np.zeros((0, 2), np.int64)
@@ -679,6 +698,8 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
     uv = np.concatenate(uv_parts)
     vert_of = np.concatenate(vo_parts)
     vert_island = np.repeat(np.arange(n_isl), [len(v) for v in vo_parts])
+    if root is not None:
+        uv, vert_of, vert_island = _merged_corners(F, Fout, tri_of, uv, vert_of, vert_island)
     # the dropped input faces share the split vertices of their kept twins, or of their vertices
     if len(R.dropped):
         first = _lowest_split_vertex(vert_of, n)
@@ -692,7 +713,21 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
             match = D[has][:, :, None] == Tv[:, None, :]            # (k,3,3)
             ids[has] = np.take_along_axis(T, match.argmax(axis=2), axis=1)
         bad = (ids < 0).any(axis=1)
-        ids[ids < 0] = 0
+        if bad.any():
+            # a vertex in dropped faces only (collapsed onto a merged point): a split vertex of its own,
+            # at the UV of another corner of the face (a point or a segment in UV), not flattened
+            miss = ids < 0
+            ref = np.where(miss.all(axis=1), 0, np.argmin(miss, axis=1))
+            src = ids[np.arange(len(ids)), ref]
+            r, c = np.nonzero(miss)
+            pairs, inv = np.unique(np.stack([np.maximum(src[r], 0), D[r, c]], 1), axis=0,
+                                   return_inverse=True)
+            new = len(vert_of) + np.arange(len(pairs))
+            ids[r, c] = new[inv.ravel()]
+            uv = np.vstack([uv, uv[pairs[:, 0]] if len(uv) else np.zeros((len(pairs), 2))])
+            vert_of = np.r_[vert_of, pairs[:, 1]]
+            vert_island = np.r_[vert_island, vert_island[pairs[:, 0]] if len(vert_island) else
+                                np.zeros(len(pairs), np.int64)]
         Fout[R.dropped] = ids
         face_island[R.dropped] = vert_island[ids[:, 0]]
         ok[R.dropped] = ~bad
@@ -706,12 +741,12 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
     good = np.array(['error' not in r for r in reports])
     size = np.sqrt((boxes[good, 0] * boxes[good, 1]).sum())
     layout = (float(boxes[:, 0].max()), float(boxes[:, 1].max()))
-    starts = np.r_[0, np.cumsum([len(v) for v in vo_parts])]
     if pack:
         gap = margin * size / max(1e-12, 1 - 2 * margin)
         off, layout = shelf_pack(boxes[good], gap)
-        for k, i in enumerate(np.nonzero(good)[0]):
-            uv[starts[i]:starts[i + 1]] += off[k]
+        shift = np.zeros((n_isl, 2))
+        shift[np.nonzero(good)[0]] = off
+        uv += shift[vert_island]
     if fit == 'unit_square':
         uv /= max(layout) if max(layout) > 0 else 1.0
     else:

@@ -37,7 +37,7 @@ from ..errors import ConformalError
 from ..disk.flatten import QC_WARN, SCALE_REMEDY, flatten, scale_variation
 from ..mesh import topology
 from ..mesh.geometry import face_areas
-from ..mesh.repair import repair, zero_area_note
+from ..mesh.repair import repair_merged, zero_area_note
 from ..mesh.measures import flip_warning, jacobians, measures_from_jacobians, signed_uv_areas, vertex_mu
 from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_mesh, degenerate_faces, loose_edge_count,
                              normalise_scale)
@@ -239,7 +239,7 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
     if flat is not None and flat[2]['overlaps'] and not flat[2]['flips']:
         disk = False          # the map overlaps itself: the island pipeline splits it into charts
     if cones is not None:
-        fixed = repair(Vs, Fs)                  # messy input: the same internal repairs as islands
+        fixed, root = repair_merged(Vs, Fs)     # messy input: the same internal repairs as islands
         zero = degenerate_faces(fixed.V, fixed.F)
         if zero.any():                          # kept: cone_unwrap mollifies them, as islands do
             fixed.repairs.append(zero_area_note(int(zero.sum())))
@@ -248,6 +248,13 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
             pack=pack, margin=margin, progress=progress)
         uv_corner_s = np.full((len(Fs), 3, 2), np.nan)
         uv_corner_s[fixed.face_map] = np.where(fixed.flipped[:, None, None], uv_r[:, [0, 2, 1]], uv_r)
+        rest, kept = fixed.dropped, fixed.face_map
+        while len(rest):               # a dropped triangle next to a filled one is filled in the next round
+            _fill_dropped(Fs if root is None else root[Fs], uv_corner_s, kept, rest)
+            done = np.isfinite(uv_corner_s[rest]).all(axis=(1, 2))
+            if not done.any():
+                break
+            kept, rest = np.r_[kept, rest[done]], rest[~done]
         isl = np.full(len(Fs), -1, np.int64)
         isl[fixed.face_map] = isl_r
         seams_s = np.unique(np.sort(fixed.vert_map[seams_r], axis=1), axis=0) if len(seams_r) else seams_r
@@ -341,6 +348,55 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
     return UnwrapResult(uv_corner=uv_corner, flattened=flattened, face_island=face_island, mu=mu,
                         mu_vertex=mu_vertex, uv=uv_s, F_uv=F_uv, islands=islands, report=summary,
                         warnings=warnings, seams=auto_seams, cones=cone_list)
+
+
+def _fill_dropped(F, uv_corner, kept, dropped):
+    """Corner UVs (in place in ``uv_corner`` (m,3,2)) for the ``dropped`` (k,) triangles of ``F`` (m,3)
+    (the repair left them out: a repeated vertex, a duplicate, or collapsed by merging coincident
+    vertices, ``F`` then holding the merged ids): from a ``kept`` triangle that shares an edge with
+    one, in one island, so that a zero-area triangle stays a point or a segment of its neighbour in
+    UV. A dropped triangle with no such neighbour keeps NaN (not flattened)."""
+    n = int(F.max()) + 1
+    Fk = F[kept]
+    e_a = np.concatenate([Fk[:, [0]], Fk[:, [1]], Fk[:, [2]]], 1)
+    e_b = np.concatenate([Fk[:, [1]], Fk[:, [2]], Fk[:, [0]]], 1)
+    key = (np.minimum(e_a, e_b) * n + np.maximum(e_a, e_b)).ravel()        # (3k,) edge of each side
+    side_face = np.repeat(np.arange(len(kept)), 3)
+    side_pos = np.tile(np.arange(3), len(kept))
+    order = np.argsort(key, kind='stable')
+    key_s = key[order]
+    D = F[dropped]
+    for j in range(3):                                   # the first side with a kept neighbour wins
+        a, b = D[:, j], D[:, (j + 1) % 3]
+        todo = ~np.isfinite(uv_corner[dropped]).all(axis=(1, 2)) & (a != b)
+        if not todo.any():
+            break
+        q = np.minimum(a, b) * n + np.maximum(a, b)
+        at = np.minimum(np.searchsorted(key_s, q), len(key_s) - 1)
+        hit = todo & (key_s[at] == q)
+        if not hit.any():
+            continue
+        f = kept[side_face[order[at[hit]]]]
+        p = side_pos[order[at[hit]]]
+        rows = dropped[hit]
+        new = np.full((len(rows), 3, 2), np.nan)
+        for r in range(3):                    # each corner of the neighbour gives its vertex's UV
+            vert = F[f, (p + r) % 3]
+            uv_r = uv_corner[f, (p + r) % 3]
+            for c in range(3):
+                same = D[hit, c] == vert
+                new[same, c] = uv_r[same]
+        uv_corner[rows] = new
+    # a triangle whose three corners merged into one vertex: that vertex's point in UV
+    D = F[dropped]
+    one = (D[:, 0] == D[:, 1]) & (D[:, 1] == D[:, 2]) & ~np.isfinite(uv_corner[dropped]).all(axis=(1, 2))
+    if one.any():
+        at = np.full(n, -1, np.int64)
+        at[Fk.ravel()[::-1]] = np.arange(Fk.size)[::-1]           # a kept corner of each vertex
+        c = at[D[one, 0]]
+        has = c >= 0
+        uv_corner[dropped[one][has]] = uv_corner[kept[c[has] // 3], c[has] % 3][:, None, :]
+    return uv_corner
 
 
 def _shared_uv(F, uv_corner):

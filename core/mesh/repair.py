@@ -236,3 +236,34 @@ def coincident_roots(V, F):
     root = np.full(n, n, np.int64)
     np.minimum.at(root, label, np.arange(n))            # the lowest vertex of each group, by label
     return root[label]
+
+
+def repair_merged(V, F):
+    """``repair`` of ``V`` (n,3), ``F`` (m,3) after vertices at one point, joined by an edge of zero length,
+    are merged (``coincident_roots``): ``(Repaired, root)``, ``root`` (n,) the vertex each input vertex
+    was merged into (None if none was). The faces the merge collapses are dropped as faces with a
+    repeated vertex, and the merged vertices are in no face; the repairs list says
+    ``coincident_vertices_merged`` for them instead (the counts of ``degenerate_faces_dropped`` and
+    ``loose_vertices_ignored`` are the input's own). Their zero-area triangles would otherwise reach
+    the operators as fake curvature: on a marching-cubes part the cones went to them (48 cones and a
+    1 %/99 % scale ratio of 0.08 in 48 s, against 10 cones, 0.56 and 8 s once merged)."""
+    F = np.asarray(F, np.int64)
+    root = coincident_roots(V, F)
+    if root is None:
+        return repair(V, F), None
+    R = repair(V, root[F])
+    merged = int((root != np.arange(len(root))).sum())
+    Fr = root[F]
+    rep_in = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+    rep_out = (Fr[:, 0] == Fr[:, 1]) | (Fr[:, 1] == Fr[:, 2]) | (Fr[:, 2] == Fr[:, 0])
+    less = {'loose_vertices_ignored': merged, 'degenerate_faces_dropped': int((rep_out & ~rep_in).sum())}
+    kept = []
+    for r in R.repairs:
+        count = r['count'] - less.get(r['repair'], 0)
+        if count > 0:
+            kept.append(dict(r, count=count))
+    R.repairs = [{'repair': 'coincident_vertices_merged', 'count': merged,
+                  'note': 'vertices at the same point, joined by an edge of zero length, are merged and '
+                          'their zero-area triangles left out'}] + kept
+    return R, root
+

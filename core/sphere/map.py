@@ -378,9 +378,8 @@ def _repaired(V, F):
     copy (vertices at one point joined by an edge of zero length merged, ``coincident_roots``; loose
     vertices, repeated-vertex and duplicate faces left out; non-manifold vertices and edges split) and
     ``F2`` its faces."""
-    from ..mesh.repair import coincident_roots, repair
-    root = coincident_roots(V, F)
-    R = repair(V, F if root is None else root[F])
+    from ..mesh.repair import repair_merged
+    R, root = repair_merged(V, F)
     if root is None and {r['repair'] for r in R.repairs} <= {'faces_reoriented'}:
         if not R.flipped.any():
             return F, None
@@ -388,21 +387,6 @@ def _repaired(V, F):
         turn = R.face_map[R.flipped]
         F2[turn] = F2[turn][:, ::-1]
         return F2, None
-    if root is not None:
-        # the merge's own leftovers are not the input's: its collapsed faces and merged vertices
-        merged = int((root != np.arange(len(V))).sum())
-        collapsed = int(((root[F][:, 0] == root[F][:, 1]) | (root[F][:, 1] == root[F][:, 2]) |
-                         (root[F][:, 2] == root[F][:, 0])).sum() -
-                        ((F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])).sum())
-        less = {'loose_vertices_ignored': merged, 'degenerate_faces_dropped': collapsed}
-        kept = []
-        for r in R.repairs:
-            count = r['count'] - less.get(r['repair'], 0)
-            if count > 0:
-                kept.append(dict(r, count=count))
-        R.repairs = [{'repair': 'coincident_vertices_merged', 'count': merged,
-                      'note': 'vertices at the same point, joined by an edge of zero length, are merged '
-                              'and their zero-area triangles left out'}] + kept
     return R.F, R
 
 
