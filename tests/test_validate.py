@@ -370,3 +370,26 @@ def test_edge_table_matches_the_separate_checks():
     # two triangles touching at vertex 0 only: two fans there
     Fp = np.array([[0, 1, 2], [0, 3, 4]])
     np.testing.assert_array_equal(topology.vertex_fans(Fp, 5), [2, 1, 1, 1, 1])
+
+
+def test_a_triangle_soup_is_named_as_one():
+    """A surface split at every vertex without a seam (a triangle soup, as an STL import leaves it) is
+    named for what it is: sphere mode's error and unwrap's warning say to merge vertices by distance;
+    parts that only lie apart get neither (sphere mode says to map one piece at a time)."""
+    from core import unwrap
+    from core.mesh.topology import split_duplicates
+    from core.sphere.map import sphere_map
+    from core.surfaces import blob
+    V, F = blob(4)
+    Vs, Fs = V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3)
+    assert split_duplicates(Vs, Fs) == len(Vs) and split_duplicates(V, F) == 0
+    with pytest.raises(ConformalError, match='Merge by Distance'):
+        sphere_map(Vs, Fs)
+    res = unwrap(Vs, Fs, boundary='area')
+    assert res.report['islands'] == len(F) and any('merge vertices by distance' in w for w in res.warnings)
+    V2, F2 = np.vstack([V, V + 5.0]), np.vstack([F, F + len(V)])
+    with pytest.raises(ConformalError, match='map one connected piece') as err:
+        sphere_map(V2, F2)
+    assert 'Merge' not in str(err.value)
+    res = unwrap(V2, F2, cones='auto')
+    assert not any('merge vertices' in w for w in res.warnings)

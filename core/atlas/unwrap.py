@@ -334,6 +334,11 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         # neighbours in the input, so their UVs read mirrored against their own normals
         warnings.append(f"{mirrored} triangle(s) are wound against their neighbours (their normals point "
                         "the other way): their UVs are mirrored; recalculate normals")
+    dup = topology.split_duplicates(Vs, Fs) if len(islands) > 1 else 0
+    if dup > SOUP_FRACTION * len(np.unique(Fs)):       # parts that touch (a teapot's lid) are not a soup
+        warnings.append(f"{dup} vertices sit on a vertex of another part (the surface is split there "
+                        "without a seam, as in a triangle soup): merge vertices by distance (Mesh > Clean "
+                        "Up > Merge by Distance) to unwrap them as one surface")
     path = 'cones' if cones is not None else 'disk' if disk else 'islands'
     summary.update({'path': path, 'boundary': boundary, 'fit': fit,
                     'holes': holes, 'island_scale': island_scale, 'triangles': int(m),
@@ -348,6 +353,12 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
     return UnwrapResult(uv_corner=uv_corner, flattened=flattened, face_island=face_island, mu=mu,
                         mu_vertex=mu_vertex, uv=uv_s, F_uv=F_uv, islands=islands, report=summary,
                         warnings=warnings, seams=auto_seams, cones=cone_list)
+
+
+# ``unwrap`` warns of a triangle soup when more than this fraction of the vertices sit on a vertex of
+# another part: a soup has all of them; the corpus teapot, whose lid and spout touch its body, 18 %;
+# suzanne 1 %, ogre under 0.1 %
+SOUP_FRACTION = 0.5
 
 
 def _fill_dropped(F, uv_corner, kept, dropped):

@@ -131,6 +131,30 @@ def face_components(F, n, twin=None):
     return connected_components(_sorted_rows_csr(h // 3, tw[h] // 3, m), directed=False)
 
 
+def split_duplicates(V, F, part=None):
+    """How many vertices of the triangles ``F`` (m,3) sit at exactly the same point ``V`` (n,3) as a
+    vertex of another connected part (``part`` (m,): each triangle's part, ``face_components``, if the
+    caller has it): a surface split there without a seam, as a triangle soup (an STL import) or an
+    export with split normals leaves it. 0 for one part."""
+    F = np.asarray(F, np.int64)
+    if part is None:
+        count, part = face_components(F, len(V))
+        if count < 2:
+            return 0
+    label = np.full(len(V), -1, np.int64)
+    label[F.ravel()] = np.repeat(np.asarray(part, np.int64), 3)
+    used = np.unique(F)
+    _, grp = np.unique(np.asarray(V)[used], axis=0, return_inverse=True)
+    grp = grp.ravel()
+    lab = label[used]
+    # a group of coincident vertices spans several parts if its labels differ
+    lo = np.full(grp.max() + 1, np.iinfo(np.int64).max)
+    hi = np.full(grp.max() + 1, -1)
+    np.minimum.at(lo, grp, lab)
+    np.maximum.at(hi, grp, lab)
+    return int((lo[grp] != hi[grp]).sum())
+
+
 def euler_characteristic(F, n_edges=None):
     """V - E + F over the vertices referenced by ``F`` (``n_edges``: the edge count, if known)."""
     nv = int(np.count_nonzero(np.bincount(F.ravel())))

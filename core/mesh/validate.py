@@ -156,10 +156,20 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
         raise ConformalError(f"mesh has {_plural(len(bad), 'non-manifold vertex')} where separate "
                              f"fans of faces touch (vertices {_examples(bad)}): split or rip them apart",
                              'bad_topology')
-    ncomp, _ = topology.face_components(F, n, twin)
+    ncomp, part = topology.face_components(F, n, twin)
     if ncomp > 1 and not (allow_parts and kind == 'surface'):
-        raise ConformalError(f"mesh has {ncomp} separate parts: flatten one connected piece at a time "
-                             "(separate by loose parts), or flatten the islands one by one", 'bad_topology')
+        dup = topology.split_duplicates(V, F, part)
+        if dup > 0.5 * len(np.unique(F)):               # split nearly everywhere: a triangle soup
+            raise ConformalError(f"mesh has {ncomp} separate parts, and {_plural(dup, 'vertex')} of them "
+                                 "sit on a vertex of another part (the surface is split there, as a "
+                                 "triangle soup is): merge vertices by distance (Mesh > Clean Up > Merge "
+                                 "by Distance)",
+                                 'bad_topology')
+        verb = 'map' if kind == 'sphere' else 'flatten'
+        raise ConformalError(f"mesh has {ncomp} separate parts: {verb} one connected piece at a time "
+                             "(separate by loose parts)" + ("" if kind == 'sphere' else
+                                                            ", or flatten the islands one by one"),
+                             'bad_topology')
     loops = topology.boundary_loops(F, n, twin)
     chi = topology.euler_characteristic(F, len(E))
     info = MeshInfo(n_vertices=n, n_faces=m, loops=loops, euler=chi, parts=int(ncomp))
