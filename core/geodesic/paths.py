@@ -568,8 +568,9 @@ def path_triangulation(V, F, cache=None):
         root = coincident_roots(V, F)
         Fw = F
         if root is not None:
+            from ..mesh.topology import repeated_vertex
             Fw = root[F]
-            Fw = Fw[(Fw[:, 0] != Fw[:, 1]) & (Fw[:, 1] != Fw[:, 2]) & (Fw[:, 2] != Fw[:, 0])]
+            Fw = Fw[~repeated_vertex(Fw)]
         try:
             # flips need one winding; a distance does not depend on it (triangles wound the wrong way
             # are turned, as sphere mode and the planar solver turn them)

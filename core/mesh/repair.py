@@ -88,7 +88,7 @@ def repair(V, F) -> Repaired:
     n, m = len(V), len(F_in)
     repairs = []
     # 1. exactly degenerate faces (a repeated vertex)
-    rep = (F_in[:, 0] == F_in[:, 1]) | (F_in[:, 1] == F_in[:, 2]) | (F_in[:, 2] == F_in[:, 0])
+    rep = topology.repeated_vertex(F_in)
     # 2. duplicate faces
     S = np.sort(F_in, axis=1)
     key = (S[:, 0] * n + S[:, 1]) * n + S[:, 2] if n < 2 ** 20 else None
@@ -207,7 +207,12 @@ def oriented_faces(V, F):
     per part) turned the same way, in the input's numbering: for answers that do not depend on a
     triangle's winding (geodesic distances) but need one orientation to be computed. Returns ``F``
     itself if no triangle is turned, else a copy."""
-    R = repair(V, F)
+    return turned_faces(F, repair(V, F))
+
+
+def turned_faces(F, R):
+    """``F`` (m,3) with the triangles that the repair ``R`` (``repair(V, F)``) turned, turned the same
+    way in the input's numbering; ``F`` itself if none is."""
     if not R.flipped.any():
         return F
     F = np.array(F, np.int64)
@@ -253,10 +258,8 @@ def repair_merged(V, F):
         return repair(V, F), None
     R = repair(V, root[F])
     merged = int((root != np.arange(len(root))).sum())
-    Fr = root[F]
-    rep_in = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
-    rep_out = (Fr[:, 0] == Fr[:, 1]) | (Fr[:, 1] == Fr[:, 2]) | (Fr[:, 2] == Fr[:, 0])
-    less = {'loose_vertices_ignored': merged, 'degenerate_faces_dropped': int((rep_out & ~rep_in).sum())}
+    collapsed = topology.repeated_vertex(root[F]) & ~topology.repeated_vertex(F)
+    less = {'loose_vertices_ignored': merged, 'degenerate_faces_dropped': int(collapsed.sum())}
     kept = []
     for r in R.repairs:
         count = r['count'] - less.get(r['repair'], 0)

@@ -10,6 +10,12 @@ def halfedges(F):
     return np.stack([F, F[:, [1, 2, 0]]], axis=2).reshape(-1, 2)
 
 
+def repeated_vertex(F):
+    """(m,) bool: the triangles of ``F`` (m,3) that name one vertex twice or more (no area by index)."""
+    F = np.asarray(F)
+    return (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+
+
 def duplicate_rows(F):
     """(k,) indices of rows of ``F`` (m,3) whose sorted vertex triple repeats an earlier row."""
     S = np.sort(F, axis=1)

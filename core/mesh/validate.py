@@ -71,7 +71,7 @@ def degenerate_faces(V, F, rel=1e-12):
     """(m,) bool: triangles of ``F`` (m,3) with a repeated vertex or an area at most ``rel`` times the
     squared mean edge length (scale-free: measured on the normalised mesh)."""
     F = np.asarray(F, np.int64)
-    rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+    rep = topology.repeated_vertex(F)
     Vn = normalise_scale(np.asarray(V, np.float64))[0]   # the test must not under- or overflow
     A = face_areas(Vn, F)
     el = norm3(Vn[F[:, 1]] - Vn[F[:, 0]])
@@ -119,7 +119,7 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
     different vertices (the caller handles them, e.g. by intrinsic mollification). Returns ``MeshInfo``."""
     V, F = check_arrays(V, F, max_faces)
     n, m = len(V), len(F)
-    rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+    rep = topology.repeated_vertex(F)
     zero = rep if allow_degenerate else degenerate_faces(V, F)
     if zero.any():
         bad = np.nonzero(zero)[0]

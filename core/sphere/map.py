@@ -378,15 +378,10 @@ def _repaired(V, F):
     copy (vertices at one point joined by an edge of zero length merged, ``coincident_roots``; loose
     vertices, repeated-vertex and duplicate faces left out; non-manifold vertices and edges split) and
     ``F2`` its faces."""
-    from ..mesh.repair import repair_merged
+    from ..mesh.repair import repair_merged, turned_faces
     R, root = repair_merged(V, F)
     if root is None and {r['repair'] for r in R.repairs} <= {'faces_reoriented'}:
-        if not R.flipped.any():
-            return F, None
-        F2 = np.array(F, np.int64)
-        turn = R.face_map[R.flipped]
-        F2[turn] = F2[turn][:, ::-1]
-        return F2, None
+        return turned_faces(F, R), None
     return R.F, R
 
 
