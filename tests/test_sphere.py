@@ -192,6 +192,16 @@ def test_sphere_map_repairs_messy_closed_meshes():
     assert np.array_equal(res.S[len(V):len(V2)], res.S[twin])          # a copy sits on its twin
     assert res.mu.shape == (len(F3),) and np.isnan(res.mu[-1]) and res.mu[-2] == res.mu[0]
     assert np.isfinite(res.mu[:len(F)]).all() and np.isnan(res.mu[len(F):len(F2)]).all()
+    # geodesics on the same messy mesh: a copy is its twin (as a vertex and as a source), the loose
+    # vertex is unreached, and the rest is the clean blob's
+    from core.sphere.geodesic import sphere_geodesic
+    d0, _ = sphere_geodesic(V, F, [5])
+    d, rep = sphere_geodesic(V3, F3, [5])
+    assert np.array_equal(d[len(V):len(V2)], d[twin]) and np.isinf(d[-1]) and rep['repairs']
+    np.testing.assert_allclose(d[:len(V)], d0, rtol=1e-12)
+    dc, _ = sphere_geodesic(V3, F3, [len(V)])
+    dt, _ = sphere_geodesic(V3, F3, [int(twin[0])])
+    assert np.array_equal(dc, dt)
     m = read_obj(os.path.join(os.path.dirname(__file__), 'data', 'cow.obj'))
     Vc, Fc = m.V, m.corner_verts.reshape(-1, 3)
     cow = sphere_map(Vc, Fc)

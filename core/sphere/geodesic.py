@@ -255,22 +255,25 @@ def default_sphere_grid(n_vertices):
     return int(np.clip(64 * np.ceil(4.0 * np.sqrt(n_vertices) / 64), 256, 768))
 
 
-def _on_repaired(fixed, V, src, S, **options):
+def _on_repaired(fixed, root, V, src, S, **options):
     """``sphere_geodesic`` of the input mesh (vertices ``V`` (n,3)) answered on its repaired copy
-    ``fixed`` (``core.mesh.repair.Repaired``): every wedge of a source vertex is a source, an input
-    vertex takes the nearest of its wedges' distances (inf for a loose vertex, in no face), ``S`` (n,3)
+    ``fixed`` (``core.mesh.repair.Repaired``; ``root`` (n,) or None, the vertices merged into others):
+    every wedge of a source vertex (of its root's, for a merged one) is a source, an input vertex takes
+    the nearest of its wedges' distances (its root's; inf for a loose vertex, in no face), ``S`` (n,3)
     in the input's numbering is carried over, and ``report['repairs']`` lists the repairs."""
-    loose = np.setdiff1d(src, fixed.vert_map)
+    n = len(V)
+    at = np.arange(n) if root is None else root              # the input vertex that stands for each
+    loose = np.setdiff1d(at[src], fixed.vert_map)
     if len(loose):
         raise ConformalError(f"source vertex {int(loose[0])} is in no face (a loose vertex): choose a "
                              "vertex of the surface")
-    wedges = np.flatnonzero(np.isin(fixed.vert_map, src))
+    wedges = np.flatnonzero(np.isin(fixed.vert_map, at[src]))
     S2 = None if S is None else np.asarray(S, np.float64)[fixed.vert_map]
     d2, report = sphere_geodesic(fixed.V, fixed.F, wedges, S=S2, **options)
-    d = np.full(len(V), np.inf)
+    d = np.full(n, np.inf)
     np.minimum.at(d, fixed.vert_map, d2)
     report['repairs'] = list(fixed.repairs) + report.get('repairs', [])
-    return d, report
+    return d[at], report
 
 
 # 'auto' answers by the paths when they get at least this many Steiner points per edge (graded): on a
@@ -338,10 +341,10 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
         raise ConformalError(f"source vertices must be indices in 0..{n - 1}")
     # a distance does not depend on a triangle's winding: faces wound the wrong way are turned; a
     # messy mesh is answered on its repaired copy, as ``sphere_map`` maps it (``_repaired``)
-    F, fixed = _repaired(V, F)
+    F, fixed, root = _repaired(V, F)
     if fixed is not None:
-        return _on_repaired(fixed, V, src, S, moebius=moebius, grid=grid, solver=solver, overlap=overlap,
-                            source_radius=source_radius, progress=progress, method=method)
+        return _on_repaired(fixed, root, V, src, S, moebius=moebius, grid=grid, solver=solver,
+                            overlap=overlap, source_radius=source_radius, progress=progress, method=method)
     if method not in GEO_METHODS:
         raise ConformalError(f"method must be one of {', '.join(GEO_METHODS)}, got {method!r}")
     if not 5.0 <= overlap <= 60.0:

@@ -372,31 +372,39 @@ def sphere_warnings(report: dict) -> list:
 
 
 def _repaired(V, F):
-    """The mesh to map: ``(F2, fixed)``. A mesh that needs at most some faces turned keeps its
-    vertices: ``F2`` is ``F`` (m,3) with those faces turned (``oriented_faces``) and ``fixed`` None, so
-    that a clean mesh keeps its map to the bit. Otherwise ``fixed`` is ``core.mesh.repair.repair``'s
-    copy (vertices at one point joined by an edge of zero length merged, ``coincident_roots``; loose
-    vertices, repeated-vertex and duplicate faces left out; non-manifold vertices and edges split) and
-    ``F2`` its faces."""
+    """The mesh to map: ``(F2, fixed, root)``. A mesh that needs at most some faces turned keeps its
+    vertices: ``F2`` is ``F`` (m,3) with those faces turned (``turned_faces``) and ``fixed`` None, so
+    that a clean mesh keeps its map to the bit. Otherwise ``fixed`` is ``repair_merged``'s copy
+    (vertices at one point joined by an edge of zero length merged into ``root`` (n,), None if none
+    was; loose vertices, repeated-vertex and duplicate faces left out; non-manifold vertices and edges
+    split) and ``F2`` its faces."""
     from ..mesh.repair import repair_merged, turned_faces
     R, root = repair_merged(V, F)
     if root is None and {r['repair'] for r in R.repairs} <= {'faces_reoriented'}:
-        return turned_faces(F, R), None
-    return R.F, R
+        return turned_faces(F, R), None, None
+    return R.F, R, root
 
 
-def _to_input(fixed, S, mu, V_in, m_in):
+def _wedge_of(fixed, root, n):
+    """(n,) a wedge of the repaired mesh ``fixed`` for every input vertex: its first wedge, or its
+    ``root``'s for a merged vertex; -1 for a loose vertex (in no face)."""
+    first = np.full(n, -1, np.int64)
+    first[fixed.vert_map[::-1]] = np.arange(len(fixed.vert_map))[::-1]   # the first wedge wins
+    return first if root is None else first[root]
+
+
+def _to_input(fixed, root, S, mu, V_in, m_in):
     """The map of the repaired mesh ``fixed`` (``Repaired``) in the input's numbering: ``S`` (n_in,3),
-    each input vertex at its first wedge's point, a loose vertex (in no face) at the point of the
-    nearest vertex in 3D; ``mu`` (m_in,) per input face, a dropped duplicate face taking its twin's,
-    NaN for a face left out with a repeated vertex or zero area."""
+    each input vertex at its first wedge's point (a merged one at its ``root``'s), a loose vertex (in
+    no face) at the point of the nearest vertex in 3D; ``mu`` (m_in,) per input face, a dropped
+    duplicate face taking its twin's, NaN for a face left out with a repeated vertex or zero area."""
     n_in = len(V_in)
-    S_in = np.full((n_in, 3), np.nan)
-    S_in[fixed.vert_map[::-1]] = S[::-1]               # the first wedge of each vertex wins
-    loose = np.flatnonzero(np.isnan(S_in[:, 0]))
+    w = _wedge_of(fixed, root, n_in)
+    S_in = np.where((w >= 0)[:, None], S[np.maximum(w, 0)], np.nan)
+    loose = np.flatnonzero(w < 0)
     if len(loose):
         from scipy.spatial import cKDTree
-        used = np.flatnonzero(~np.isnan(S_in[:, 0]))
+        used = np.flatnonzero(w >= 0)
         near = cKDTree(V_in[used]).query(V_in[loose])[1]
         S_in[loose] = S_in[used[near]]
     mu_in = np.full(m_in, np.nan)
@@ -427,7 +435,7 @@ def sphere_map(V: np.ndarray, F: np.ndarray, moebius: str = 'uniform', max_faces
     # loose vertices, repeated-vertex and duplicate faces left out, non-manifold vertices and edges
     # split; zero-area triangles are kept (the mollified metric handles them) and left out of the
     # measures and of the Moebius objective
-    F, fixed = _repaired(V_in, F_in)
+    F, fixed, root = _repaired(V_in, F_in)
     V = V_in if fixed is None else fixed.V
     turned = int((F != F_in).any(1).sum()) if fixed is None else 0
     check_mesh(V, F, kind='sphere', max_faces=max_faces, allow_degenerate=True)
@@ -452,7 +460,7 @@ def sphere_map(V: np.ndarray, F: np.ndarray, moebius: str = 'uniform', max_faces
         report['flipped_faces'] = faces_r[flipped].tolist()
     else:
         report['flipped_faces'] = np.unique(fixed.face_map[faces_r[flipped]]).tolist()
-        S, mu = _to_input(fixed, S, mu, V_in, len(F_in))
+        S, mu = _to_input(fixed, root, S, mu, V_in, len(F_in))
     if flipped.any() and not flipped.all():
         report['mu_ratio_oriented'] = float(mu_r[~flipped].min() / mu_r[~flipped].max())
     report['moebius_point'] = [round(x, 9) for x in minfo['c']]
