@@ -55,7 +55,7 @@ import time
 import numpy as np
 
 from ..errors import ConformalError
-from ..mesh.geometry import face_areas
+from ..mesh.geometry import edge_graph, face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
 from .planar import plane_coordinates, planar_paths
 from .paths import (PATH_BUDGET, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, SteinerGraph, path_points,
@@ -1735,12 +1735,7 @@ class GeodesicSolver:
         for ch in self.charts:
             ch.rasterise(mu_mode)
         # the edge graph of the cut surface, for the upper bound (Dijkstra)
-        import scipy.sparse as sp
-        E = np.concatenate([self.Fs[:, [0, 1]], self.Fs[:, [1, 2]], self.Fs[:, [2, 0]]])
-        w = np.linalg.norm(Vs[E[:, 0]] - Vs[E[:, 1]], axis=1)
-        w = np.maximum(w, 1e-300)                              # csgraph drops explicit zeros
-        self.graph = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
-                                   shape=(N, N)).tocsr()
+        self.graph = edge_graph(Vs, self.Fs, N)
         seconds['rasterise'] = time.perf_counter() - t
         self.report = report
         self.seconds = seconds

@@ -66,6 +66,22 @@ def face_areas(V, F):
     return 0.5 * norm3(face_normals_unnormalised(V, F))
 
 
+def edge_graph(V, F, n=None):
+    """The edge graph of the triangles ``F``: a symmetric (n,n) CSR matrix (``n`` default ``len(V)``)
+    whose entry (i,j) is the 3D length of edge ij, each edge once however many triangles hold it (a
+    sparse matrix built from every triangle's sides would sum the two sides of an interior edge into
+    twice its length). Zero lengths are kept as 1e-300: scipy's graphs drop explicit zeros."""
+    import scipy.sparse as sp
+    from .topology import unique_edges
+    n = len(V) if n is None else n
+    if not len(F):
+        return sp.csr_matrix((n, n))
+    E, _ = unique_edges(F)
+    w = np.maximum(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1), 1e-300)
+    return sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
+                         shape=(n, n)).tocsr()
+
+
 def edge_vectors(V, F):
     """(m,3,3): row k is the edge vector opposite corner k, ``V[F[:,k+2]] - V[F[:,k+1]]``."""
     P = V[F]
