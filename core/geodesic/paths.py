@@ -24,10 +24,27 @@ SHORT_FACES = 8      # fraction, and at least this many of them, are warned abou
 
 def mesh_edges(F):
     """The edges of the triangles ``F`` (m,3): ``(ue (e,2) sorted pairs in np.unique's order, inv (m,3)
-    the edge of each side)``, side ``s`` joining corners ``s`` and ``s + 1``."""
+    the edge of each side)``, side ``s`` joining corners ``s`` and ``s + 1``. Two sides are one edge
+    when they join the same two vertices: true of a mesh, not of an intrinsic triangulation (use
+    ``intrinsic_edges``)."""
     Ed = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1)
     ue, inv = np.unique(Ed, axis=0, return_inverse=True)
     return ue, inv.reshape(3, len(F)).T
+
+
+def intrinsic_edges(T):
+    """``mesh_edges`` of an intrinsic triangulation ``T`` (``core.mesh.intrinsic``), from its own edge
+    ids: flips can join two vertices by two different edges (of different lengths, on different
+    sides of the surface), which a vertex pair cannot tell apart. Taken as one edge, their Steiner
+    points were shared, a shortcut between two places of the surface: on a noisy marching-cubes bust
+    (77 such pairs in 27k triangles) the plain paths came out 2 % below the exact distance.
+    ``(ue (e,2), inv (m,3))`` as ``mesh_edges``: ``ue[e]`` the sorted ends of edge ``e``."""
+    F = np.asarray(T.F, np.int64)
+    inv = np.asarray(T.FE, np.int64)[:, [2, 0, 1]]          # side s (corners s, s + 1) is opposite s + 2
+    ue = np.zeros((int(inv.max()) + 1 if inv.size else 0, 2), np.int64)
+    for s_ in range(3):
+        ue[inv[:, s_]] = np.sort(F[:, [s_, (s_ + 1) % 3]], axis=1)
+    return ue, inv
 
 
 def _areas(V, F, lengths=None):
@@ -319,12 +336,12 @@ class SurfacePaths:
     np.unique of the same sorted edges). ``lengths`` (m,3): ``F`` is an intrinsic triangulation with
     these side lengths (``SteinerGraph``)."""
 
-    def __init__(self, V, F, k, graded=False, lengths=None):
+    def __init__(self, V, F, k, graded=False, lengths=None, edges=None):
         if k < 3 or k % 2 == 0:
             raise ValueError(f"Richardson's extrapolation needs an odd k >= 3, got {k}")
         self.k = k
         F = np.asarray(F, np.int64)
-        edges = mesh_edges(F)
+        edges = mesh_edges(F) if edges is None else edges
         grade = None
         self.short = (0.0, 0)
         self.grade_need = 0.0
@@ -492,33 +509,33 @@ def graded_fit(n_faces, n_edges, need, k_max, k_min=PATH_K[-1]):
                  if grading_room(n_faces, n_edges, j) >= need), None)
 
 
-def full_grading(V, F, lengths=None):
+def full_grading(V, F, lengths=None, edges=None):
     """The grading every thin triangle of ``F`` (m,3) asks for, with no budget: ``(ue, inv, amin, full)``
     (``mesh_edges``, ``edge_corner_angles`` and ``edge_grading`` of vertices ``V`` (n,3), or of the
-    triangles' side ``lengths`` (m,3) of an intrinsic triangulation). ``grade_extra(full, inv)`` is
-    what it adds to the graphs' links."""
+    triangles' side ``lengths`` (m,3) and ``edges`` (``intrinsic_edges``) of an intrinsic
+    triangulation). ``grade_extra(full, inv)`` is what it adds to the graphs' links."""
     F = np.asarray(F, np.int64)
-    ue, inv = mesh_edges(F)
+    ue, inv = mesh_edges(F) if edges is None else edges
     amin = edge_corner_angles(V, F, inv, len(ue), lengths)
     return ue, inv, amin, edge_grading(V, F, ue, inv, np.inf, amin)
 
 
-def graded_k(V, F, k, cache=None, lengths=None):
+def graded_k(V, F, k, cache=None, lengths=None, edges=None):
     """The Steiner points per edge to build for a requested ``k`` (odd) on the triangles ``F`` (m,3)
     (vertices ``V`` (n,3)): ``k``; or, where its graphs would leave thin triangles over ``SHORT_AREA``
     of the area short of their graded points (``edge_grading`` within ``grading_room``), the largest
     odd ``k' < k`` (at least ``PATH_K[-1]``) at which every thin triangle gets them, if there is one.
-    ``lengths`` (m,3): the triangles' side lengths (opposite each corner) of an intrinsic triangulation.
-    Measured on scans whose flanks stand nearly vertical (needles over a third of the area, 10k
-    triangles, against exact MMP): fully graded at k = 11, mean 0.069-0.086 % and max 1.1-1.6 %; short
-    of the grading at k = 13 and 15, 0.065-0.11 % and 4.0-4.5 %. ``cache``: a dict kept between calls
-    (the answer per ``k``)."""
+    ``lengths`` (m,3) and ``edges``: the triangles' side lengths (opposite each corner) and edges
+    (``intrinsic_edges``) of an intrinsic triangulation. Measured on scans whose flanks stand nearly
+    vertical (needles over a third of the area, 10k triangles, against exact MMP): fully graded at
+    k = 11, mean 0.069-0.086 % and max 1.1-1.6 %; short of the grading at k = 13 and 15, 0.065-0.11 %
+    and 4.0-4.5 %. ``cache``: a dict kept between calls (the answer per ``k``)."""
     cache = {} if cache is None else cache
     got = cache.setdefault('graded_k', {})
     if k in got:
         return got[k]
     F = np.asarray(F, np.int64)
-    ue, inv, amin, full = full_grading(V, F, lengths)
+    ue, inv, amin, full = full_grading(V, F, lengths, edges)
     need = grade_extra(full, inv)
     out = k
     if need > grading_room(len(F), len(ue), k):
@@ -540,9 +557,10 @@ PATH_MOLLIFY = 1e-9
 
 def path_triangulation(V, F, cache=None):
     """The triangles the surface paths search instead of ``F`` (m,3) (vertices ``V`` (n,3)):
-    ``(F' (m',3), lengths (m',3), root)``, the intrinsic Delaunay triangulation of the same surface
-    (edge flips, no mollification: the same metric to round-off) with its side lengths opposite each
-    corner, and ``root`` (n,) the vertex that stands for each vertex or None (``coincident_roots``:
+    ``(F' (m',3), lengths (m',3), root, edges)``, the intrinsic Delaunay triangulation of the same
+    surface (edge flips, no mollification: the same metric to round-off) with its side lengths opposite
+    each corner, its edges (``intrinsic_edges``: flips may join two vertices twice) and ``root`` (n,)
+    the vertex that stands for each vertex or None (``coincident_roots``:
     vertices at one point, joined by edges of zero length, are merged first, and ``PATH_MOLLIFY``
     mollifies the zero-area triangles left); or None, to search ``F`` itself. The intrinsic one is
     taken where ``F``'s thin triangles would add more than ``GRADE_EXTRA`` to the graphs' links when
@@ -580,9 +598,10 @@ def path_triangulation(V, F, cache=None):
             T = None
         lengths = None if T is None else T.l
         if T is not None and (T.report['flips'] or root is not None) and np.isfinite(lengths).all():
-            _, inv2, _, full2 = full_grading(V, T.F, lengths)
+            edges = intrinsic_edges(T)
+            _, inv2, _, full2 = full_grading(V, T.F, lengths, edges)
             if grade_extra(full2, inv2) < need:
-                out = (T.F, lengths, root)
+                out = (T.F, lengths, root, edges)
     cache['triangulation'] = out
     return out
 
@@ -633,18 +652,18 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
     if 'edge' not in cache:
         cache['edge'] = float(np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2).mean())
     edge = cache['edge']
-    lengths = None
+    lengths = edges = None
     if X is None:
         # vertex sources: on a mesh of thin triangles, the paths search its intrinsic Delaunay
         # triangulation (the same surface, other edges), with a cache of its own
         tri = path_triangulation(V, F, cache)
         if tri is not None:
-            F, lengths, root = tri
+            F, lengths, root, edges = tri
             cache = cache.setdefault('intrinsic', {})
             if root is not None:
                 src = np.unique(root[src])
     try:
-        out = _surface_paths(V, F, lengths, src, k, X, faces, target, k_max, cache, fit_grading, edge)
+        out = _surface_paths(V, F, lengths, edges, src, k, X, faces, target, k_max, cache, fit_grading, edge)
     finally:
         top['short'] = cache.get('short', (0.0, 0))
     if lengths is not None and root is not None:      # merged vertices: their group's distance
@@ -652,16 +671,17 @@ def surface_paths(V, F, sources, k, X=None, faces=None, target=None, k_max=PATH_
     return out
 
 
-def _surface_paths(V, F, lengths, src, k, X, faces, target, k_max, cache, fit_grading, edge):
-    """``surface_paths`` on the triangles ``F`` (m,3) with side ``lengths`` (m,3) or None (``V``'s)."""
+def _surface_paths(V, F, lengths, edges, src, k, X, faces, target, k_max, cache, fit_grading, edge):
+    """``surface_paths`` on the triangles ``F`` (m,3) with side ``lengths`` (m,3) and ``edges``
+    (``intrinsic_edges``), or None (``V``'s, ``mesh_edges``)."""
     graphs = cache.setdefault('graphs', {})
     if fit_grading:
-        k = graded_k(V, F, k, cache, lengths)
+        k = graded_k(V, F, k, cache, lengths, edges)
     first = None
     while True:
         pair = graphs.get(k)
         if pair is None:
-            pair = graphs[k] = SurfacePaths(V, F, k, graded=True, lengths=lengths)
+            pair = graphs[k] = SurfacePaths(V, F, k, graded=True, lengths=lengths, edges=edges)
         dv, _, ev = pair.distances(src, X, faces)
         far = np.isfinite(dv) & (dv > edge)
         rel = ev[far] / (dv[far] + ev[far])
@@ -677,8 +697,7 @@ def _surface_paths(V, F, lengths, src, k, X, faces, target, k_max, cache, fit_gr
             return dv, estimate, k
         want = k * max(estimate / (0.8 * target), worst / (0.8 * PATH_WORST)) ** (1.0 / STEINER_ORDER)
         if 'n_edges' not in cache:
-            from ..mesh.topology import unique_edges
-            cache['n_edges'] = len(unique_edges(F)[0])
+            cache['n_edges'] = len(pair.fine.ue)
         k_hi = min(int(np.ceil(want)) | 1, k_max)
         if fit_grading and pair.short[1] == 0:
             # a graph whose thin triangles all got their graded points stays so: more points per edge

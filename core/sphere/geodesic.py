@@ -291,7 +291,7 @@ def _paths_points(V, F, k, cache):
     tri = path_triangulation(V, F, cache)
     if tri is None:
         return graded_k(V, F, k, cache)
-    return graded_k(V, tri[0], k, cache.setdefault('intrinsic', {}), tri[1])
+    return graded_k(V, tri[0], k, cache.setdefault('intrinsic', {}), tri[1], tri[3])
 
 
 def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver='auto',
