@@ -474,9 +474,9 @@ def run_sphere(name, V, F, rows, plot):
     """Sphere mode (``core.sphere.geodesic.sphere_geodesic``) on a closed genus-0 mesh, against MMP on
     the closed mesh, beside the heat method and mesh FMM; the same four source sets."""
     from core.sphere.geodesic import sphere_geodesic
+    from core.mesh.geometry import edge_graph
     from core.sphere.map import sphere_map
     from scipy.sparse.csgraph import dijkstra
-    import scipy.sparse as sp
     t = time.perf_counter()
     try:
         S = sphere_map(V, F).S
@@ -484,10 +484,7 @@ def run_sphere(name, V, F, rows, plot):
         print(f"# {name}: sphere mode not handled ({exc}); skipped", flush=True)
         return
     t_setup = time.perf_counter() - t
-    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    w = np.maximum(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1), 1e-300)
-    graph = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
-                          shape=(len(V), len(V))).tocsr()
+    graph = edge_graph(V, F)                    # each edge once, at its length
     part = np.unique(F)
     sets = source_sets(V, F, part, graph, np.zeros(len(V), bool))
     D, t_exact = exact_multi(V, F, sets)

@@ -782,3 +782,20 @@ def test_untangle_s_linear_programs_match_highs_exactly():
     g = np.c_[np.cos(ring), np.sin(ring)]
     assert abs(ring_clearance(g, np.full(60, 0.5)) - 0.5) < 1e-9
     assert l1_nearest(np.array([[1.0, 0.0], [-1.0, 0.0]]), np.array([1.0, 0.0])) is None   # x >= 1, x <= 0
+
+
+def test_layouts_stop_at_their_budget(monkeypatch):
+    """``cone_unwrap`` computes at most ``MAX_LAYOUTS`` exact layouts of angle candidates (a noisy
+    scan whose every layout folded went through 56 of them, minutes): with a budget of one, the torus
+    keeps the placement's layout (clean here), says it skipped the rest, and a layout that is not clean
+    at the budget says so in a warning."""
+    from core.atlas import cones
+    V, F = torus()
+    full = cone_unwrap(V, F)
+    assert full.report['layouts'] > 1
+    monkeypatch.setattr(cones, 'MAX_LAYOUTS', 1)
+    one = cone_unwrap(V, F)
+    assert one.report['layouts'] == 1 and one.report['flips'] == 0
+    assert any(c.get('budget') for c in one.report['angle_candidates'])
+    assert one.report['angle_candidates'][0]['angles'] == full.report['angle_candidates'][0]['angles']
+    assert not any('tries' in w for w in one.report['warnings'])       # clean: nothing to warn about

@@ -82,6 +82,10 @@ SOFT_FLOORS = (-2.0, -1.0, 0.0)     # raised lower bounds of cones next to a fli
 SOFT_STEP = 0.5                    # ... a cone below SOFT_FLOORS[0] is first raised by this (``_next_floor``)
 SOFT_ROUNDS = 5                    # layouts with raised floors at most (``softened``)
 NUDGE_TRIES = 4                    # ... or a cone next to flips moved to a neighbour (``nudged``)
+MAX_LAYOUTS = 24                   # exact layouts of angle candidates in one ``cone_unwrap`` at most:
+                                   # 1-7 on the corpus and its head cuts, 20 on the cow (its tail);
+                                   # a noisy scan whose every layout folds ran through 56 of them,
+                                   # 3.6 s each (docs/cones.md, "Noisy scans")
 VERIFY = 3                         # screened candidates (moves, greedy look-ahead) scored exactly
 MOVE_RADIUS = 2                    # cone moves: each cone tries the vertices within this many edges
 MOVE_SWEEPS = 16                   # ... in passes until none moves (then one pass a ring wider), at most
@@ -1767,6 +1771,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         best = None
         tried = []
         cache = {}
+
         def corrected():
             """Angle sets that account for the exact metric: the realised log scale differs from the
             linear one by ``d = u_exact - u_linear``, nearly independent of small angle changes; the area-L2
@@ -1817,6 +1822,9 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         for label, kap in itertools.chain(*sets):
             if big_done():
                 break                                   # big mesh: the first valid layout is kept
+            if budget[0] >= MAX_LAYOUTS:
+                tried.append({'angles': label, 'skipped': True, 'budget': True})
+                break
             if any(np.array_equal(kap, k0) for k0 in seen):
                 continue                                # (leaves' angles equal to the placement's)
             seen.append(kap)
@@ -1826,6 +1834,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
                 # a layout realises at most about its estimate: this one cannot beat the clean best
                 tried.append({'angles': label, 'estimate': est, 'skipped': True})
                 continue
+            budget[0] += 1
             try:
                 ev = _evaluate(Vw, Fw, system, S, kap, seams0, cache, u=u_lin)
             except ConformalError as exc:
@@ -1847,6 +1856,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         return best, tried, dirty
 
     t_lay = time.perf_counter()
+    budget = [0]                         # exact layouts computed so far (at most MAX_LAYOUTS)
     best, tried, dirty = lay_out(S, kappa)
     kept_bounds = system.bounds
     alts = getattr(system, 'alternates', [])
@@ -1856,7 +1866,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         # no clean layout, realises less than another placement's estimate (ALT_MARGIN below it),
         # or misses the target that another placement's estimate reaches (a clean layout that meets
         # the target keeps the placement's cones: the fewest that reach it)
-        if cones is not None or n > BIG_MESH:
+        if cones is not None or n > BIG_MESH or budget[0] >= MAX_LAYOUTS:
             break
         missed = target_ratio is not None and best is not None and best[0][2] < target_ratio <= est
         if best is not None and best[0][0] and best[0][2] >= est - ALT_MARGIN and not missed:
@@ -1880,7 +1890,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         # automatic mode: the layout realises less than the placement's estimate promised, so the
         # target is missed; place again for an estimate raised by the shortfall (more cones), and keep
         # that if its layout is clean and better
-        if best is None or not best[0][0] or best[0][2] >= target_ratio or len(S) >= int(max_cones):
+        if best is None or not best[0][0] or best[0][2] >= target_ratio or len(S) >= int(max_cones) \
+                or budget[0] >= MAX_LAYOUTS:
             break
         aim = min(aim + (target_ratio - best[0][2]) + TOP_UP_MARGIN, 0.99)
         S2, k2, h2 = place_cones(system, aim, int(max_cones), sweeps,
@@ -1898,6 +1909,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         # clean one: the same cones with that cone moved to a neighbour (``nudged``)
         system.bounds = kept_bounds
         for S2, k2 in nudged(system, Fw, dirty[1], S):
+            if budget[0] >= MAX_LAYOUTS:
+                break
             best2, tried2, _ = lay_out(S2, k2, clean_ratio(best), quick=True)
             tried += [dict(c, angles=f"{c['angles']} (a cone next to flips moved)") for c in tried2]
             if best2 is not None and best2[0] > best[0]:
@@ -1937,6 +1950,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
     }
     rep['angles'] = angles_used
     rep['angle_candidates'] = tried
+    rep['layouts'] = budget[0]
     if measured['flips']:
         warnings.append(f"{measured['flips']} triangle(s) are flipped in the layout")
     if measured['degenerate']:
@@ -1944,6 +1958,9 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
                         f"(s1/s2 > {DEGENERATE_QC:g})")
     if crossings:
         warnings.append(f"the layout overlaps itself ({crossings} boundary crossing(s))")
+    if budget[0] >= MAX_LAYOUTS and (measured['flips'] or crossings or measured['degenerate']):
+        warnings.append(f"no clean layout in {MAX_LAYOUTS} tries (the most computed): on a noisy scan, "
+                        "smooth it first or use fewer cones; or mark seams yourself")
     spread = realised_spread(measured)
     if target_ratio is not None and cones is None and spread < target_ratio:
         warnings.append(f"the 1%/99% scale ratio {spread:.3f} (the worse of per triangle and area-weighted) "
