@@ -122,9 +122,10 @@ class SteinerGraph:
     from any sources (``search``).
 
     Attributes: ``k``; ``n`` vertices; ``P`` (N,3) the graph points (the n vertices first); ``ue``
-    (e,2) the edges, sorted; ``inv`` (m,3) the edge of each triangle's side; ``count`` (e,) the points on
-    each edge (``k``, or ``(k + 1) m_e - 1`` with a ``grade``) and ``start`` (e,) the index of its first
-    (the points of an edge are consecutive, from ``ue[:, 0]`` to ``ue[:, 1]``); without a grade also
+    (e,2) the edges' ends, each pair sorted; ``inv`` (m,3) the edge of each triangle's side; ``count``
+    (e,) the points on each edge (``k``, or ``(k + 1) m_e - 1`` with a ``grade``) and ``start`` (e,)
+    the index of its first (the points of an edge are consecutive, from ``ue[:, 0]`` to ``ue[:, 1]``);
+    without a grade also
     ``pid`` (e,k) their indices and ``own`` (m, 3 + 3k) the points on each triangle's boundary; ``G``
     the links both ways as a (N+1, N+1) CSR matrix (mesh units) over the points numbered by ``rank``
     (N,), whose last row is a virtual source that ``search`` joins to surface points (its ``SPARE``
@@ -332,9 +333,9 @@ class SurfacePaths:
     (``distances``); ``graded``: both with the edge multipliers of ``edge_grading`` (``(k + 1) m_e - 1``
     and ``(k + 1) / 2 m_e - 1`` points), adding at most ``GRADE_EXTRA`` to the links or, where
     ``PATH_BUDGET`` has room for the pair, up to ``GRADE_EXTRA_MAX``. The coarse graph's points are the
-    vertices and fine points 1, 3, ... (0-based) of every edge, in the same edge order (both from
-    np.unique of the same sorted edges). ``lengths`` (m,3): ``F`` is an intrinsic triangulation with
-    these side lengths (``SteinerGraph``)."""
+    vertices and fine points 1, 3, ... (0-based) of every edge, in the same edge order (both graphs
+    take the same ``edges``: ``mesh_edges``, or ``intrinsic_edges`` given). ``lengths`` (m,3): ``F`` is
+    an intrinsic triangulation with these side lengths (``SteinerGraph``)."""
 
     def __init__(self, V, F, k, graded=False, lengths=None, edges=None):
         if k < 3 or k % 2 == 0:

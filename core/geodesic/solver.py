@@ -1445,7 +1445,8 @@ class Chart:
         self.seed_metric = None
         if self.ginv is not None:
             a, b, c = self.ginv.T
-            det = a * c - b * b
+            # (a triangle the map squashes to a needle has det 0 to round-off: a huge, finite metric)
+            det = np.maximum(a * c - b * b, 1e-12 * a * c + np.finfo(float).tiny)
             self.seed_metric = (G.face, np.stack([c / det, -b / det, a / det], 1))     # G = (G^-1)^-1
         # triangles the grid does not resolve (surface cell above UNRESOLVED times their mean edge):
         # their vertices take on-mesh fast marching from the resolved ones (``MeshRelax``)
