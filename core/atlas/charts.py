@@ -6,6 +6,7 @@ overlaps itself without folding."""
 import numpy as np
 
 from ..mesh import topology
+from ..mesh.geometry import weighted_graph
 from .cut import boundary_crossings, cut_along_seams, shelf_pack
 from .cutgraph import is_disk
 
@@ -53,7 +54,6 @@ def _interior_path(V, vert_of, E, onb, p, q, N, lp=None):
     3D lengths, or None. Edges touching a boundary vertex (``onb`` (N,) bool) other than ``p`` and
     ``q`` cost ten times their length (such a path splits a piece into more than two, which is
     allowed), and the boundary edges of ``lp`` (the loop) are never used."""
-    import scipy.sparse as sp
     from scipy.sparse.csgraph import dijkstra
     if p == q:
         return None
@@ -66,7 +66,7 @@ def _interior_path(V, vert_of, E, onb, p, q, N, lp=None):
     w = np.maximum(np.linalg.norm(V[vert_of[E[:, 0]]] - V[vert_of[E[:, 1]]], axis=1), 1e-300)
     touch = (onb[E[:, 0]] & ~end[E[:, 0]]) | (onb[E[:, 1]] & ~end[E[:, 1]])
     w = np.where(touch, 10 * w, w)
-    G = sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])), shape=(N, N)).tocsr()
+    G = weighted_graph(E, w, N)
     dist, pred = dijkstra(G, directed=False, indices=p, return_predecessors=True)
     if not np.isfinite(dist[q]):
         return None

@@ -20,6 +20,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree, connected_components
 
 from ..mesh import topology
+from ..mesh.geometry import weighted_graph
 
 
 def edge_list(V, F):
@@ -32,13 +33,6 @@ def edge_list(V, F):
     Gi = sp.coo_matrix((np.r_[idx, idx], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
                        shape=(n, n)).tocsr()
     return E, w, Gi
-
-
-def _weighted(E, w, n):
-    # zero-length edges would vanish from a scipy graph: keep them with a tiny positive weight
-    w = np.maximum(w, 1e-300)
-    return sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
-                         shape=(n, n)).tocsr()
 
 
 def _path_edges(pred, v):
@@ -78,7 +72,8 @@ def homology_loops(V, F, root=None):
         w = np.where((E >= n).any(1), w.max() * 10 + 1, w)       # keep caps off the short loops
     if root is None:
         root = 0
-    dist, pred = dijkstra(_weighted(E, w, nc), directed=False, indices=int(root), return_predecessors=True)
+    dist, pred = dijkstra(weighted_graph(E, w, nc), directed=False, indices=int(root),
+                          return_predecessors=True)
     in_tree = np.zeros(len(E), bool)
     child = np.nonzero(pred >= 0)[0]
     tree_e = np.asarray(Gi[child, pred[child]]).ravel() - 1
@@ -129,7 +124,7 @@ def steiner_tree(V, F, groups):
     for i, g in enumerate(groups):
         label[g] = i
     src = np.nonzero(label >= 0)[0]
-    dist, pred, sources = dijkstra(_weighted(E, w, n), directed=False, indices=src, min_only=True,
+    dist, pred, sources = dijkstra(weighted_graph(E, w, n), directed=False, indices=src, min_only=True,
                                    return_predecessors=True)
     region = np.where(sources >= 0, label[np.maximum(sources, 0)], -1)
     ra, rb = region[E[:, 0]], region[E[:, 1]]
@@ -269,7 +264,7 @@ def reroute_leaf(V, F, edges, corner, start, leaves, stop, protect=None):
         ok = ~(free[E[:, 0]] | free[E[:, 1]])
         if free[start]:
             continue
-        dist, pred = dijkstra(_weighted(E[ok], w[ok], n), directed=False, indices=int(start),
+        dist, pred = dijkstra(weighted_graph(E[ok], w[ok], n), directed=False, indices=int(start),
                               return_predecessors=True)
         if not np.isfinite(dist[d]):
             continue
@@ -354,7 +349,7 @@ def through_corner(V, F, edges, corner, start, stop, protect=None):
             prev, v = v, nxt[0]
     # off-cut vertices, plus steps onto allowed cut vertices (which end a path: they are sinks)
     ok = ~(own[E[:, 0]] | own[E[:, 1]]) & ~(on_cut[E[:, 0]] & on_cut[E[:, 1]])
-    dist, pred = dijkstra(_weighted(E[ok], w[ok], n), directed=False, indices=int(start),
+    dist, pred = dijkstra(weighted_graph(E[ok], w[ok], n), directed=False, indices=int(start),
                           return_predecessors=True)
     target = on_cut & ~own & np.isfinite(dist)
     if not target.any():

@@ -66,20 +66,24 @@ def face_areas(V, F):
     return 0.5 * norm3(face_normals_unnormalised(V, F))
 
 
+def weighted_graph(E, w, n):
+    """The symmetric (n,n) CSR graph of the undirected edges ``E`` (e,2), each listed once, with
+    weights ``w`` (e,). Zero weights are kept as 1e-300: scipy's graphs drop explicit zeros."""
+    import scipy.sparse as sp
+    w = np.maximum(w, 1e-300)
+    return sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
+                         shape=(n, n)).tocsr()
+
+
 def edge_graph(V, F, n=None):
     """The edge graph of the triangles ``F``: a symmetric (n,n) CSR matrix (``n`` default ``len(V)``)
     whose entry (i,j) is the 3D length of edge ij, each edge once however many triangles hold it (a
     sparse matrix built from every triangle's sides would sum the two sides of an interior edge into
-    twice its length). Zero lengths are kept as 1e-300: scipy's graphs drop explicit zeros."""
-    import scipy.sparse as sp
+    twice its length)."""
     from .topology import unique_edges
     n = len(V) if n is None else n
-    if not len(F):
-        return sp.csr_matrix((n, n))
-    E, _ = unique_edges(F)
-    w = np.maximum(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1), 1e-300)
-    return sp.coo_matrix((np.r_[w, w], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
-                         shape=(n, n)).tocsr()
+    E, _ = unique_edges(F) if len(F) else (np.zeros((0, 2), np.int64), None)
+    return weighted_graph(E, np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1), n)
 
 
 def edge_vectors(V, F):
