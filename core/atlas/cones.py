@@ -1903,7 +1903,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         tried += [dict(c, angles=f"{c['angles']} ({len(S2)} cones, top-up for {aim:.3f})") for c in tried2]
         if best2 is not None and best2[0] > best[0]:
             best, S, history, dirty, kept_bounds = best2, S2, h2, dirty2, system.bounds
-    if cones is None and n <= BIG_MESH and dirty and best is not None and \
+    if cones is None and n <= BIG_MESH and dirty and best is not None and budget[0] < MAX_LAYOUTS and \
             not (best[0][0] and best[0][2] >= dirty[0]):
         # a layout with a squashed or flipped triangle next to a cone realised more than the best
         # clean one: the same cones with that cone moved to a neighbour (``nudged``)
