@@ -541,11 +541,18 @@ def _merged_corners(F, Fout, rows, uv, vert_of, vert_island):
     if not off.any():
         return uv, vert_of, vert_island
     pairs, inv = np.unique(np.stack([C[off], want[off]], 1), axis=0, return_inverse=True)
-    new = len(vert_of) + np.arange(len(pairs))
-    C[off] = new[inv.ravel()]
+    C[off] = len(vert_of) + inv.ravel()
     Fout[rows] = C
-    return (np.vstack([uv, uv[pairs[:, 0]]]), np.r_[vert_of, pairs[:, 1]],
-            np.r_[vert_island, vert_island[pairs[:, 0]]])
+    return _split_copies(pairs, uv, vert_of, vert_island)
+
+
+def _split_copies(pairs, uv, vert_of, vert_island):
+    """``uv`` (N,2), ``vert_of`` (N,) and ``vert_island`` (N,) extended by one new split vertex per row
+    of ``pairs`` (k,2) (numbered ``N + row``): the split vertex ``pairs[:, 0]`` whose UV and island it
+    takes (zeros without any split vertex yet), and the input vertex ``pairs[:, 1]`` it stands for."""
+    src = pairs[:, 0]
+    return (np.vstack([uv, uv[src] if len(uv) else np.zeros((len(pairs), 2))]), np.r_[vert_of, pairs[:, 1]],
+            np.r_[vert_island, vert_island[src] if len(vert_island) else np.zeros(len(pairs), np.int64)])
 
 
 def _lowest_split_vertex(res_vert_of, n_in):
@@ -722,12 +729,8 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
             r, c = np.nonzero(miss)
             pairs, inv = np.unique(np.stack([np.maximum(src[r], 0), D[r, c]], 1), axis=0,
                                    return_inverse=True)
-            new = len(vert_of) + np.arange(len(pairs))
-            ids[r, c] = new[inv.ravel()]
-            uv = np.vstack([uv, uv[pairs[:, 0]] if len(uv) else np.zeros((len(pairs), 2))])
-            vert_of = np.r_[vert_of, pairs[:, 1]]
-            vert_island = np.r_[vert_island, vert_island[pairs[:, 0]] if len(vert_island) else
-                                np.zeros(len(pairs), np.int64)]
+            ids[r, c] = len(vert_of) + inv.ravel()
+            uv, vert_of, vert_island = _split_copies(pairs, uv, vert_of, vert_island)
         Fout[R.dropped] = ids
         face_island[R.dropped] = vert_island[ids[:, 0]]
         ok[R.dropped] = ~bad
