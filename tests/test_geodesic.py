@@ -1391,6 +1391,42 @@ def test_an_overlapping_chart_is_answered_by_surface_paths():
     assert any('overlaps itself' in w for w in rep_g['warnings'])
 
 
+def test_a_seamed_surface_whose_map_overlaps_is_answered_on_the_cut_surface():
+    """Seams and an overlapping map together: the helical ramp with a slit (a seam across half its
+    width) still winds past a full turn, so the flattening splits it into more islands than the
+    seams make. Those islands were walls (the far side of the split unreached: 740 infinite
+    distances). The piece is glued back along every edge that is not a seam and answered by surface
+    paths on the cut surface: finite everywhere, the slit crossed only around its end, and within
+    0.1 % of finer paths on the cut mesh."""
+    from core.atlas.cut import cut_along_seams
+    from core.geodesic.paths import steiner_distances
+    V, F, idx = _ramp(10, 150)
+    slit = idx[:5, 75]
+    seams = np.c_[slit[:-1], slit[1:]]
+    S = geo.GeodesicSolver(V, F, seams=seams)
+    assert S.report['cut_parts'] == 1 and len(S.charts) == 1
+    s = int(idx[4, 0])
+    d, rep = S.distance(sources=[s])
+    assert np.isfinite(d).all() and rep['paths_islands'] == 1 and not rep['warnings']
+    c = cut_along_seams(F, len(V), seams)
+    ref_c, _, _, _ = steiner_distances(V[c.vert_of], c.F, src=int(np.flatnonzero(c.vert_of == s)[0]),
+                                       k=21, extrapolate=True)
+    ref = np.full(len(V), np.inf)
+    np.minimum.at(ref, c.vert_of, ref_c)
+    far = ref > 0.1
+    err = np.abs(d[far] - ref[far]) / ref[far]
+    assert err.mean() < 1e-3 and err.max() < 0.01
+    # across the slit near its closed end: around it, much longer than the straight step across
+    a, b = idx[0, 74], idx[0, 76]
+    assert abs(d[b] - d[a]) > 0.5 * np.linalg.norm(V[a] - V[b]) + 0.5
+    # a slit in a map that does not overlap keeps its grid chart (a bump's grid, a slit across its middle)
+    from core import make_surface
+    V2, F2 = make_surface('bump', 17)
+    slit2 = np.arange(len(V2)).reshape(17, 17)[8, 4:13]
+    S2 = geo.GeodesicSolver(V2, F2, seams=np.c_[slit2[:-1], slit2[1:]])
+    assert S2.report['cut_parts'] == 0 and isinstance(S2.charts[0], geo.Chart)
+
+
 def test_reversed_faces_do_not_matter():
     """A scan with a few faces wound the wrong way (ten reversed at random) gives the distances of the
     clean mesh: the solver turns them as the repair does (it used to stop with 'flipped triangles').

@@ -11,6 +11,7 @@ from core.mesh import topology
 from core.cli import main
 from core.errors import ConformalError
 from core.mesh.geometry import face_areas
+from core.atlas.cut import glued_pieces
 from core.atlas.islands import (boundary_crossings, cut_along_seams, fill_holes, seams_from_corner_ids,
                           shelf_pack, unwrap)
 from core.mesh.measures import uv_measures
@@ -55,6 +56,29 @@ def test_cut_keeps_positions_and_counts(sphere):
         assert Fi.min() == 0 and Fi.max() == hi - lo - 1
         loops = topology.boundary_loops(Fi, hi - lo)
         assert len(loops) == 1 and topology.euler_characteristic(Fi) == 1
+
+
+def test_gluing_undoes_only_the_cuts_beyond_the_seams(sphere):
+    """``glued_pieces`` is the inverse of a cut: the sphere cut along its seams and glued back with the
+    same seams is unchanged (its two hemispheres, every split vertex its own, nothing joined); glued
+    with only the equator as seams, the meridian cut is undone (one copy per vertex of each
+    hemisphere, flagged as joined); with none, the whole sphere is one piece again, up to shuffled
+    faces."""
+    V, F, S = sphere
+    cut = cut_along_seams(F, len(V), S)
+    piece, n_p, glued, joined = glued_pieces(F, cut.F, cut.face_island, S, len(V))
+    assert n_p == 2 and not joined.any() and len(np.unique(glued)) == len(cut.vert_of)
+    assert np.array_equal(np.unique(np.c_[piece, cut.face_island], axis=0)[:, 0], [0, 1])
+    equator = S[:64]
+    piece, n_p, glued, joined = glued_pieces(F, cut.F, cut.face_island, equator, len(V))
+    assert n_p == 2 and joined.all() and len(np.unique(glued)) == len(V) + 64
+    rng = np.random.default_rng(0)
+    order = rng.permutation(len(F))
+    Fp = np.roll(F[order], 1, axis=1)
+    Fc = np.roll(cut.F[order], 1, axis=1)
+    piece, n_p, glued, joined = glued_pieces(Fp, Fc, cut.face_island[order], None, len(V))
+    assert n_p == 1 and joined.all() and len(np.unique(glued)) == len(V)
+    assert np.array_equal(np.unique(glued[cut.F]), np.arange(len(V)))
 
 
 def test_slit_seam_opens_a_closed_sphere_into_one_disk():

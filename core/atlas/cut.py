@@ -1,5 +1,6 @@
 """Cutting a triangle mesh along seams into islands, and the checks of a flat layout that every path
-uses: ``cut_along_seams`` (the split vertices and islands, ``Cut``), ``seam_pairs``,
+uses: ``cut_along_seams`` (the split vertices and islands, ``Cut``), ``glued_pieces`` (its
+inverse: islands glued back where they were cut beyond the seams), ``seam_pairs``,
 ``boundary_crossings`` (a layout's boundary self-crossings: with no flip, none means no overlap) and
 ``shelf_pack`` (islands side by side). Below ``islands`` and ``charts``; imports nothing of the atlas."""
 from dataclasses import dataclass
@@ -109,6 +110,50 @@ def cut_along_seams(F, n, seams=None, strict=True, twin=None):
     newid[order] = np.arange(len(order))
     return Cut(F=newid[wedge].reshape(m, 3), vert_of=w_vert[order], face_island=face_island.astype(np.int64),
                vert_island=w_isl[order].astype(np.int64), n_islands=int(n_isl))
+
+
+def glued_pieces(F, Fs, island, seams, n):
+    """The surface the answers are on, rebuilt from a flattening's islands: the islands (``island``
+    (m,)) of the triangles ``F`` (m,3) on ``n`` input vertices, with split vertex ids ``Fs`` (m,3),
+    glued back across every edge held by exactly two triangles (neither naming a vertex twice) that is
+    not in ``seams`` ((k,2) vertex pairs or None). Returns ``(piece (m,), n_pieces, glued (N,), joined
+    (n_pieces,) bool)``: the piece of each triangle, the glued id of each split vertex, and the pieces
+    in which the flattening cut more than the seams and the mesh's non-manifold edges do (two islands,
+    or two split copies of a vertex, glued together)."""
+    m, N = len(F), int(Fs.max()) + 1 if len(Fs) else 0
+    H = np.sort(topology.halfedges(F), axis=1)
+    key = H[:, 0] * n + H[:, 1]
+    order = np.argsort(key, kind='stable')
+    k = key[order]
+    cnt = np.diff(np.r_[np.flatnonzero(np.r_[True, k[1:] != k[:-1]]), len(k)])
+    two = np.repeat(cnt == 2, cnt)                             # per sorted half-edge: its edge has two
+    first = np.flatnonzero(two[:-1] & (k[1:] == k[:-1]))       # the first of each such pair
+    h1, h2 = order[first], order[first + 1]
+    ok = ~topology.repeated_vertex(F)
+    good = ok[h1 // 3] & ok[h2 // 3]
+    if seams is not None and len(seams):
+        S = np.sort(np.asarray(seams, np.int64), axis=1)
+        good &= ~np.isin(k[first], S[:, 0] * n + S[:, 1])
+    h1, h2 = h1[good], h2[good]
+    t1, t2 = h1 // 3, h2 // 3
+    Fr, Sr = F.ravel(), Fs.ravel()
+    a1, b1 = h1, 3 * t1 + (h1 % 3 + 1) % 3                     # corners of the edge's ends in t1
+    a2, b2 = h2, 3 * t2 + (h2 % 3 + 1) % 3
+    same = Fr[a1] == Fr[a2]                                    # both run the same way (misoriented)
+    c_a2, c_b2 = np.where(same, a2, b2), np.where(same, b2, a2)
+    ja, jb = np.r_[Sr[a1], Sr[b1]], np.r_[Sr[c_a2], Sr[c_b2]]
+    ones = np.ones(len(ja), np.int8)
+    _, glued = connected_components(sp.coo_matrix((ones, (ja, jb)), shape=(N, N)), directed=False)
+    n_isl = int(island.max()) + 1 if m else 0
+    ones = np.ones(len(t1), np.int8)
+    n_pieces, piece_of = connected_components(
+        sp.coo_matrix((ones, (island[t1], island[t2])), shape=(n_isl, n_isl)), directed=False)
+    piece = piece_of[island]
+    joined = np.zeros(n_pieces, bool)
+    joined[piece[t1[island[t1] != island[t2]]]] = True
+    split = ja != jb
+    joined[piece[np.r_[t1, t1][split]]] = True
+    return piece, n_pieces, glued, joined
 
 
 def boundary_crossings(uv, loops, return_segments=False):

@@ -1235,32 +1235,46 @@ def _fits_paths(F):
     return path_points(len(F), len(unique_edges(F)[0])) is not None
 
 
-def _cut_parts(V, Fo, shut, part, Fs, island, count, reports=()):
-    """(count,) bool: the open parts (``part`` (m,) of the input triangles; ``shut`` the closed ones,
-    ``Fo`` (mo,3) the others' triangles) that the flattening cut beyond the repair of the mesh (which
-    splits non-manifold vertices and edges, ``core.mesh.repair``: the surface every answer is on), on
-    ``Fs`` (mo,3) split vertex ids and ``island`` (mo,) islands: a hole cut open, an overlapping map
-    split (more islands or more split vertices than the repaired part has), or an island's map that
-    still overlaps itself (``reports``: the islands' reports, with ``overlaps``; a few flipped
-    triangles only disturb the grid locally); and small enough for surface paths, which answer them
-    uncut."""
-    from ..mesh.repair import repair
-    from ..mesh.topology import face_components
-    po = part[~shut[part]]
-    R = repair(V, Fo)
-    pr = po[R.face_map]                                       # part of each repaired triangle
-    _, comp = face_components(R.F, len(R.V))
-    n_isl = np.bincount(np.unique(np.c_[po, island], axis=0)[:, 0], minlength=count)
-    n_isl_rep = np.bincount(np.unique(np.c_[pr, comp], axis=0)[:, 0], minlength=count)
-    n_split = np.bincount(np.unique(np.c_[np.repeat(po, 3), Fs.ravel()], axis=0)[:, 0], minlength=count)
-    n_rep = np.bincount(np.unique(np.c_[np.repeat(pr, 3), R.F.ravel()], axis=0)[:, 0], minlength=count)
-    cut = (n_isl > n_isl_rep) | (n_split > n_rep)
-    bad = np.array([r.get('overlaps', 0) > 0 for r in reports], bool)
+def _cut_parts(Fo, res, seams, n):
+    """The pieces of the surface that the flattening ``res`` (``core.atlas.islands.unwrap`` of the
+    open triangles ``Fo`` (mo,3) on ``n`` input vertices, cut along ``seams``) cut beyond the seams and
+    the repair of the mesh (which splits non-manifold vertices and edges, ``core.mesh.repair``: the
+    surface every answer is on): a hole cut open, an overlapping map split, or an island's map that
+    still overlaps itself (its report's ``overlaps``; a few flipped triangles only disturb the grid
+    locally); and small enough for surface paths, which answer them uncut. Returns ``(piece (mo,),
+    cut (pieces,) bool, glued (N,))`` (``core.atlas.cut.glued_pieces``)."""
+    from ..atlas.cut import glued_pieces
+    piece, _, glued, cut = glued_pieces(Fo, res.F, res.face_island, seams, n)
+    bad = np.array([r.get('overlaps', 0) > 0 for r in res.islands], bool)
     if bad.any():
-        cut[np.unique(po[bad[island]])] = True
+        cut[np.unique(piece[bad[res.face_island]])] = True
     for p in np.flatnonzero(cut):
-        cut[p] = _fits_paths(Fo[po == p])
-    return cut
+        cut[p] = _fits_paths(Fo[piece == p])
+    return piece, cut, glued
+
+
+def _paths_pieces(vert_of, Fs, uvs, island, piece, cut, glued):
+    """The split arrays of a flattening (``vert_of`` (N,), ``Fs`` (mo,3), ``uvs`` (N,2), ``island``
+    (mo,)) with the pieces ``cut`` (pieces,) bool (``piece`` (mo,) of each triangle) glued back
+    (``glued`` (N,) the glued id of each split vertex): their vertices are one per glued id, their uv
+    NaN (no chart), one island each after the others (renumbered from 0). Returns ``(vert_of, Fs,
+    uvs, island)``."""
+    tri = cut[piece]
+    keep = np.unique(Fs[~tri])
+    new = np.full(len(vert_of), -1, np.int64)
+    new[keep] = np.arange(len(keep))
+    g, ginv = np.unique(glued[Fs[tri]], return_inverse=True)
+    vert_of_g = np.empty(int(glued.max()) + 1, np.int64)
+    vert_of_g[glued] = vert_of                       # glued copies are copies of one input vertex
+    Fs2 = np.empty_like(Fs)
+    Fs2[~tri] = new[Fs[~tri]]
+    Fs2[tri] = len(keep) + ginv.reshape(-1, 3)
+    isl_keep = np.unique(island[~tri])
+    isl2 = np.empty_like(island)
+    isl2[~tri] = np.searchsorted(isl_keep, island[~tri])
+    isl2[tri] = len(isl_keep) + np.searchsorted(np.unique(piece[tri]), piece[tri])
+    return (np.r_[np.asarray(vert_of, np.int64)[keep], vert_of_g[g]], Fs2,
+            np.vstack([uvs[keep], np.full((len(g), 2), np.nan)]), isl2)
 
 
 def _append_closed(F, shut, part, vert_of, Fs, uvs, face_island, n):
@@ -1610,6 +1624,7 @@ class GeodesicSolver:
             shut = closed_parts(F, count, face_island) if seams is None and method != 'grid' else \
                 np.zeros(count, bool)
             part = face_island
+            shut_cut = 0                                # parts in ``shut`` that are cut open ones
             say(0.0, 'flattening')
             from ..mesh.topology import boundary_loops
             Fo = F[~shut[face_island]]
@@ -1623,6 +1638,7 @@ class GeodesicSolver:
                 # split the vertex, and paths through it would be lost; the surface paths take the
                 # surface as it is
                 shut[:] = cut_face[:] = True
+                shut_cut = 1
                 report['cut_parts'], report['pinched_parts'] = 1, 1
                 vert_of, Fs, uvs, face_island = np.zeros(0, np.int64), Fo[:0], np.zeros((0, 2)), \
                     np.zeros(0, np.int64)
@@ -1638,6 +1654,7 @@ class GeodesicSolver:
                     # flipped triangles without an overlap reach the chart, which sends the island to
                     # surface paths too: ``folded_parts``)
                     shut[:] = cut_face[:] = True
+                    shut_cut = 1
                     report['cut_parts'] = 1
                     vert_of, Fs, uvs, face_island = np.zeros(0, np.int64), Fo[:0], np.zeros((0, 2)), \
                         np.zeros(0, np.int64)
@@ -1648,29 +1665,24 @@ class GeodesicSolver:
                 # holes filled virtually (a hole cut open would be a wall the distances cannot cross)
                 res = unwrap(V, Fo, seams=seams, boundary=boundary, fit='true_scale', pack=False,
                              allow_loose=True, holes='fill')
-                cut = _cut_parts(V, Fo, shut, part, res.F, res.face_island, count, res.islands) \
-                    if seams is None and method != 'grid' else np.zeros(count, bool)
-                if cut.any():
-                    # parts the flattening cut all the same (a filled map that overlapped and was split
-                    # into charts, or halved): surface paths on the whole part instead
-                    shut |= cut
-                    Fo = F[~shut[face_island]]
-                    if len(Fo):
-                        res = unwrap(V, Fo, seams=None, boundary=boundary, fit='true_scale', pack=False,
-                                     allow_loose=True, holes='fill')
-                report['cut_parts'] = int(cut.sum())
-                cut_face = cut[part]
-                if len(Fo):
-                    vert_of, Fs, uvs, face_island = res.vert_of, res.F, res.uv, res.face_island
+                vert_of, Fs, uvs, face_island = res.vert_of, res.F, res.uv, res.face_island
+                if method != 'grid':
+                    # pieces the flattening cut all the same (a filled map that overlapped and was split
+                    # into charts, or halved): surface paths on the whole piece instead, glued back
+                    piece, cut, glued = _cut_parts(Fo, res, seams, self.n)
+                    if cut.any():
+                        vert_of, Fs, uvs, face_island = _paths_pieces(vert_of, Fs, uvs, face_island, piece,
+                                                                      cut, glued)
+                        cut_face[~shut[part]] = cut[piece]
+                    report['cut_parts'] = int(cut.sum())
                 else:
-                    vert_of, Fs, uvs, face_island = np.zeros(0, np.int64), Fo, np.zeros((0, 2)), \
-                        np.zeros(0, np.int64)
+                    report['cut_parts'] = 0
             if shut.any():
                 vert_of, Fs, uvs, face_island = _append_closed(F, shut, part, vert_of, Fs, uvs, face_island,
                                                                self.n)
             count = int(face_island.max()) + 1
             report['boundary'] = boundary
-            report['closed_parts'] = int(shut.sum()) - report.get('cut_parts', 0)
+            report['closed_parts'] = int(shut.sum()) - shut_cut
             seconds['flatten'] = time.perf_counter() - t0
         say(0.3, 'rasterising')
         t = time.perf_counter()
