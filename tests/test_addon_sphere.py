@@ -100,15 +100,16 @@ def test_sphere_operator_writes_everything(addon, bl):
 
 
 def test_folded_map_reports_warning(addon, bl):
-    """Cheburashka's needles fold a few triangles on the sphere: the operator says WARNING, lists the
-    warnings, and reports the sphere folds and the UV flips separately."""
-    import os
-    d = np.load(os.path.join(os.path.dirname(os.path.abspath(__file__)), 'data', 'sphere_cheburashka.npz'))
-    obj = bl.mesh_object('cheb', d['V'].astype(float), d['F'].astype(np.int64))
+    """A mesh of slivers (a convex hull of random points, like a CAD export) folds many triangles on
+    the sphere, too many for the untangling to try: the operator says WARNING, lists the warnings,
+    and reports the sphere folds and the UV flips separately."""
+    from core.surfaces import hull_part
+    V, F = hull_part(n=800)
+    obj = bl.mesh_object('slivers', V, F)
     assert bpy.ops.uv.conformal_sphere(moebius='UNIFORM', bake=False) == {'FINISHED'}
     rep = addon.addon.meshio.load_report(obj.data, 'conformal_sphere_report')
     assert rep['flips'] > 0 and rep['warnings'] and 'folded' in rep['warnings'][0]
-    assert rep['uv_flips'] >= rep['flips'] - 1 and rep['moebius_converged'] is True
+    assert rep['uv_flips'] > 0
     from conformal_flatten.addon.ops_sphere import summary_line
     assert 'sphere flips' in summary_line(rep) and 'UV flips' in summary_line(rep)
 

@@ -176,7 +176,8 @@ def conformal_sphere(V: np.ndarray, F: np.ndarray, progress=None) -> tuple:
     Returns ``(S (n,3) unit vectors, info dict)``: ``pole_triangle``, ``pole_rings``, ``intrinsic``
     (the intrinsic Delaunay report: ``flips``, ``eps`` in units of V, ``negative_before``,
     ``negative_after``, ``converged``), ``flow_steps``, ``flow_last_angle_change`` (radians),
-    ``chart_flips`` (folds of the chart map before the flow)."""
+    ``chart_flips`` (folds of the chart map before the flow), ``untangle`` (``core.sphere.untangle``:
+    the folds before and after, the patches kept and dropped)."""
     from ..disk.flatten import flatten
     report = progress or (lambda f, msg: None)
     V = np.asarray(V, np.float64)
@@ -246,8 +247,13 @@ def conformal_sphere(V: np.ndarray, F: np.ndarray, progress=None) -> tuple:
     f0, f1 = _count_flips(F, S0), _count_flips(F, S)
     if f1 > f0:                               # never trade the chart's orientation for angles
         S, steps = S0, 0
+    # folded obtuse faces undone where the map around them allows (``core.sphere.untangle``)
+    from .untangle import untangle
+    real = ~degenerate_faces(V, F)
+    S, unt = untangle(S, F, V, real, qc=lambda X, f: sphere_measures(V, F[f], X, per_face=True)[1][1])
     return S, {'pole_triangle': int(t), 'pole_rings': int(kout), 'intrinsic': idt,
-               'flow_steps': int(steps), 'flow_last_angle_change': float(move), 'chart_flips': int(f0)}
+               'flow_steps': int(steps), 'flow_last_angle_change': float(move), 'chart_flips': int(f0),
+               'untangle': unt}
 
 
 def _count_flips(F, S):
