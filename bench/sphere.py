@@ -186,8 +186,10 @@ def main():
           f"({100 * cheb['flips'] / cheb['faces']:.2f}%); {int((th > 170).sum())} faces have an angle over "
           f"170 degrees. Folded faces stay folded under any Moebius map, so the Moebius objective and "
           f"the table's ratios for this mesh run over the oriented faces; over all faces uniform gives "
-          f"{cheb['uniform_all_faces']:.2e}. Flipped faces (largest angle in degrees):")
-    print(', '.join(f"{f} ({th[f]:.0f})" for f in cheb['flipped_faces']))
+          f"{cheb['uniform_all_faces']:.2e}." + (" Flipped faces (largest angle in degrees):"
+                                                  if cheb['flipped_faces'] else ""))
+    if cheb['flipped_faces']:
+        print(', '.join(f"{f} ({th[f]:.0f})" for f in cheb['flipped_faces']))
 
     if not args.quick:
         print('\n## conformality under refinement (spot, the same surface split flat)\n')
