@@ -427,20 +427,30 @@ def test_geodesic_marches_on_resolved_charts_beyond_the_paths_budget(monkeypatch
     assert rep['method'] == 'paths' and rep['steiner_points'] == 3
 
 
-def test_geodesic_auto_takes_the_paths_from_seven_graded_points(monkeypatch):
+def test_geodesic_auto_weighs_the_paths_it_can_afford_against_the_charts(monkeypatch):
     """'auto' answers by the paths when they get at least ``SPHERE_PATH_K`` = 7 Steiner points per
-    edge (graded), else it marches where the charts resolve the surface: a 120k-triangle lumpy
-    sphere whose paths fitted k = 5 (graded to 3) came out at 0.37 % against the charts' 0.034 %."""
+    edge (graded). With fewer it takes whichever is expected to be more accurate: the paths' expected
+    error at the points they get (``PATH_ERROR_9 (9 / k)^1.85``) or the charts' estimate. A coarse
+    blob (1280 triangles) at 5 points: the paths, 0.12 % mean against the charts' 1.05 % (it used to
+    march); a finer one (11520) at 3 points: the charts, 0.13 % against the paths' 0.28 % (a
+    120k-triangle lumpy sphere whose paths were graded to 3 points: 0.034 % against 0.37 %)."""
     from core.geodesic import paths
+    from core.geodesic.paths import steiner_distances
     from core.sphere import geodesic as sg
-    V, F = blob(8)
-    ne = 3 * len(F) // 2
-    for k, method in ((5, 'charts'), (7, 'paths')):
+    for freq, k, method in ((8, 7, 'paths'), (8, 5, 'paths'), (24, 3, 'charts')):
+        V, F = blob(freq)
+        ne = 3 * len(F) // 2
         monkeypatch.setattr(paths, 'PATH_BUDGET', paths.path_links(len(F), ne, k)
                             + paths.path_links(len(F), ne, (k - 1) // 2))
         assert paths.path_points(len(F), ne) == k
-        _, rep = sg.sphere_geodesic(V, F, [5])
-        assert rep['method'] == method, (k, rep['method'])
+        d, rep = sg.sphere_geodesic(V, F, [5])
+        assert rep['method'] == method, (freq, k, rep['method'])
+        if (freq, k) == (8, 5):
+            dc, _ = sg.sphere_geodesic(V, F, [5], method='charts')
+            ref, _, _, _ = steiner_distances(V, F, src=5, k=21, extrapolate=True)
+            far = ref > 0.05 * ref.max()
+            e_auto, e_charts = (np.mean(np.abs(x[far] - ref[far]) / ref[far]) for x in (d, dc))
+            assert e_auto < e_charts / 3, (e_auto, e_charts)
 
 
 def test_surface_paths_sources_scale_and_budget():

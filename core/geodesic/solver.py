@@ -1265,7 +1265,7 @@ def _paths_pieces(vert_of, Fs, uvs, island, piece, cut, glued):
     new[keep] = np.arange(len(keep))
     g, ginv = np.unique(glued[Fs[tri]], return_inverse=True)
     vert_of_g = np.empty(int(glued.max()) + 1, np.int64)
-    vert_of_g[glued] = vert_of                       # glued copies are copies of one input vertex
+    vert_of_g[glued] = np.asarray(vert_of)[:len(glued)]   # glued copies are copies of one input vertex
     Fs2 = np.empty_like(Fs)
     Fs2[~tri] = new[Fs[~tri]]
     Fs2[tri] = len(keep) + ginv.reshape(-1, 3)
