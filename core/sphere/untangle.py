@@ -32,7 +32,7 @@ KEEP = 0.25       # a face's image keeps at least this fraction of its 3D aspect
 QC_GROWTH = 0.1    # a patch is kept if its area-weighted qc grows by at most 10 % ...
 QC_SLACK = 0.1     # ... or by 0.1
 SCALE_SLACK = 1e-3 # and no face's scale leaves the map's range (of the unfolded faces) by more than 0.1 %
-CHUNK = 4096       # vertices per vectorised step
+QP_ENTRIES = 4_000_000  # entries of the batched quadratic programs' largest array (32 MB)
 MAX_FOLDED = 0.02  # above this fraction of folded faces the map is broken throughout (a mesh of
                    # slivers), not locally: no relaxation is tried
 
@@ -122,6 +122,11 @@ def _relax(S, F, verts, Z, W, aspect, real, corners, start):
     to its ring's conformal target, projected onto the positions that keep its faces outwards."""
     cnt = start[verts + 1] - start[verts]
     D = int(cnt.max())
+    per = max(1, QP_ENTRIES // (D * (1 + D + D * (D - 1) // 2)))     # the candidates' (B, C, D) arrays
+    if len(verts) > per:
+        for lo in range(0, len(verts), per):
+            _relax(S, F, verts[lo:lo + per], Z, W, aspect, real, corners, start)
+        return
     B = len(verts)
     idx = start[verts][:, None] + np.arange(D)[None, :]
     mask = np.arange(D)[None, :] < cnt[:, None]
@@ -197,8 +202,7 @@ def untangle(S: np.ndarray, F: np.ndarray, V: np.ndarray, real: np.ndarray | Non
     S1 = S.copy()
     for _ in range(SWEEPS):
         for cls in classes:
-            for lo in range(0, len(cls), CHUNK):
-                _relax(S1, F, cls[lo:lo + CHUNK], Z, W, aspect, real, corners, start)
+            _relax(S1, F, cls, Z, W, aspect, real, corners, start)
     # keep a connected patch only if it folds less and its conformality holds
     moved = np.linalg.norm(S1 - S, axis=1) > 0
     if not moved.any():
