@@ -517,3 +517,38 @@ def test_coincident_vertices_are_merged_for_unwrap():
     assert c1.report['cones'] == c0.report['cones'] and c1.flattened.all() and c1.report['flips'] == 0
     assert c1.report['mu_ratio_p1_p99'] == pytest.approx(c0.report['mu_ratio_p1_p99'], rel=1e-6)
     assert 'coincident_vertices_merged' in {r['repair'] for r in c1.report['repairs']}
+
+
+
+def test_a_dropped_face_on_a_seam_stays_in_one_island():
+    """A face naming a seam vertex twice is dropped; its corners take split vertices of one island
+    (the one holding copies of most of its corners), so its UVs are a segment of one edge's length
+    inside that island. They were each vertex's lowest copy: a segment from one island to the other,
+    3.5 times a triangle's size across the layout."""
+    V, F = grid(9)
+    V = np.c_[V[:, :2], 0.2 * np.sin(2 * V[:, 0])]
+    row = np.arange(81).reshape(9, 9)[4]
+    seams = np.c_[row[:-1], row[1:]]                       # two islands
+    F2 = np.vstack([F, [[40, 40, 49]]])                    # 40 on the seam, 49 above it
+    res = unwrap(V, F2, seams=seams, boundary='area')
+    ids = res.F[len(F)]
+    owner = np.zeros(len(res.vert_of), np.int64)
+    owner[res.F[:len(F)].ravel()] = np.repeat(res.face_island[:len(F)], 3)
+    assert len(set(owner[ids].tolist())) == 1 and res.face_island[len(F)] == owner[ids[0]]
+    seg = np.ptp(res.uv[ids], axis=0).max()
+    edge = np.linalg.norm(res.uv[res.F[:len(F), 0]] - res.uv[res.F[:len(F), 1]], axis=1).max()
+    assert seg <= edge * (1 + 1e-9)
+
+
+def test_a_repeated_vertex_face_alone_merges_nothing():
+    """A face naming one vertex twice has an edge of zero length from that vertex to itself; it is
+    dropped as degenerate, and no 'coincident_vertices_merged' repair with a count of 0 is listed
+    beside it (the merge found no two vertices to join)."""
+    from core.mesh.repair import repair_merged
+    V, F = grid(9)
+    F2 = np.vstack([F, [[40, 40, 41]]])
+    R, root = repair_merged(V, F2)
+    assert root is None
+    assert {r['repair']: r['count'] for r in R.repairs} == {'degenerate_faces_dropped': 1}
+    res = unwrap(V, F2, boundary='area')
+    assert {r['repair'] for r in res.report['repairs']} == {'degenerate_faces_dropped'}

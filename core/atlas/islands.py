@@ -564,6 +564,32 @@ def _lowest_split_vertex(res_vert_of, n_in):
     return first
 
 
+def _one_island_ids(D, vert_of, vert_island, first):
+    """(k,3) split vertices for the corners of dropped faces ``D`` (k,3) (input vertex ids): each
+    corner's copy in one island where the vertex has a copy there, else its lowest copy (``first``
+    (n,), ``_lowest_split_vertex``). The island is the one, among those of the corners' lowest copies,
+    that holds copies of the most corners. So a dropped face on a seam stays a point or a segment
+    inside one island, instead of a segment from one island to another across the layout."""
+    ids = first[D]
+    if not len(D) or not (ids >= 0).any():
+        return ids
+    n_isl = int(vert_island.max()) + 1
+    key = vert_of * n_isl + vert_island
+    order = np.argsort(key, kind='stable')
+    skey = key[order]
+    best, best_found = ids, np.full(len(D), -1)
+    for c in range(3):
+        ok = ids[:, c] >= 0
+        q = D * n_isl + vert_island[np.maximum(ids[:, c], 0)][:, None]
+        pos = np.minimum(np.searchsorted(skey, q), len(skey) - 1)
+        found = (skey[pos] == q) & ok[:, None]
+        nf = found.sum(1)
+        better = nf > best_found
+        best = np.where(better[:, None], np.where(found, order[pos], ids), best)
+        best_found = np.where(better, nf, best_found)
+    return best
+
+
 def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='true', pack=True,
            margin=0.01, fit='unit_square', max_faces=DEFAULT_MAX_FACES, allow_loose=True, edges=None,
            on_error='raise', tri_poly=None, strict_seams=True, progress=None, **options) -> 'IslandsResult':
@@ -711,7 +737,7 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
     if len(R.dropped):
         first = _lowest_split_vertex(vert_of, n)
         D = F[R.dropped]
-        ids = first[D]
+        ids = _one_island_ids(D, vert_of, vert_island, first)
         tw = R.twin_of_dropped
         has = tw >= 0
         if has.any():

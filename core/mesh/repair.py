@@ -254,10 +254,10 @@ def repair_merged(V, F):
     1 %/99 % scale ratio of 0.08 in 48 s, against 10 cones, 0.56 and 8 s once merged)."""
     F = np.asarray(F, np.int64)
     root = coincident_roots(V, F)
-    if root is None:
+    merged = 0 if root is None else int((root != np.arange(len(root))).sum())
+    if not merged:                         # no zero-length edge, or only those of repeated-vertex faces
         return repair(V, F), None
     R = repair(V, root[F])
-    merged = int((root != np.arange(len(root))).sum())
     collapsed = topology.repeated_vertex(root[F]) & ~topology.repeated_vertex(F)
     less = {'loose_vertices_ignored': merged, 'degenerate_faces_dropped': int(collapsed.sum())}
     kept = []
