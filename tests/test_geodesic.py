@@ -1427,6 +1427,29 @@ def test_a_seamed_surface_whose_map_overlaps_is_answered_on_the_cut_surface():
     assert S2.report['cut_parts'] == 0 and isinstance(S2.charts[0], geo.Chart)
 
 
+def test_seams_on_one_part_leave_a_closed_part_to_the_surface_paths():
+    """A closed part that no seam touches is answered by surface paths on the closed surface, seams or
+    not: a mesh of a sphere (no seam) and a bump with a seam used to stop with the flattening's
+    'island 1 of 2 is closed' (its remedy about cones). Distances on the sphere follow its great
+    circles; between the parts they are infinite."""
+    from core import make_surface
+    from core.surfaces import icosphere
+    V1, F1 = icosphere(8)
+    V2, F2 = make_surface('bump', 17)
+    V = np.vstack([V1 + [5.0, 0, 0], V2])
+    F = np.vstack([F1, F2 + len(V1)])
+    row = np.arange(289).reshape(17, 17)[8, 3:12] + len(V1)
+    S = geo.GeodesicSolver(V, F, seams=np.c_[row[:-1], row[1:]])
+    assert S.report['closed_parts'] == 1
+    assert sorted(type(c).__name__ for c in S.charts) == ['Chart', 'PathsChart']
+    d, rep = S.distance(sources=[5])
+    ang = np.arccos(np.clip(V1 @ V1[5], -1, 1))
+    far = ang > 0.2
+    ratio = d[:len(V1)][far] / ang[far]               # the inscribed polyhedron: 0.4 % short at most
+    assert 0.99 < ratio.min() and ratio.max() < 1.0
+    assert np.isinf(d[len(V1):]).all()
+
+
 def test_reversed_faces_do_not_matter():
     """A scan with a few faces wound the wrong way (ten reversed at random) gives the distances of the
     clean mesh: the solver turns them as the repair does (it used to stop with 'flipped triangles').

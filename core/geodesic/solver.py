@@ -1222,6 +1222,21 @@ def closed_parts(F, count, face_island):
     return ~open_part
 
 
+def _seamed_parts(F, seams, n, count, face_island):
+    """(count,) bool: the connected parts (``face_island`` (m,) of the triangles ``F`` (m,3) on ``n``
+    vertices) that hold an edge of ``seams`` ((k,2) vertex pairs or None; checked by ``seam_pairs``)."""
+    from ..atlas.cut import seam_pairs
+    from ..mesh.topology import halfedges
+    out = np.zeros(count, bool)
+    S = np.sort(seam_pairs(seams, n), axis=1)
+    if not len(S):
+        return out
+    H = np.sort(halfedges(F), axis=1)
+    hit = np.isin(H[:, 0] * n + H[:, 1], S[:, 0] * n + S[:, 1])
+    out[np.unique(face_island[np.flatnonzero(hit) // 3])] = True
+    return out
+
+
 def _pinched(F, n):
     """True if the triangles ``F`` (m,3) on ``n`` vertices pinch at a vertex (separate fans of
     triangles touch there, ``vertex_fans``)."""
@@ -1542,7 +1557,7 @@ class GeodesicSolver:
     ``core.disk.flatten`` (``boundary`` 'uniform', 'area' or 'free'), else (several parts, seams,
     holes, loose vertices) every island of ``core.atlas.islands.unwrap`` (holes filled virtually;
     ``seams`` (k,2) vertex pairs cut the surface; distances are measured
-    on the cut surface). Distances between islands are infinite. A closed part (without ``seams``)
+    on the cut surface). Distances between islands are infinite. A closed part that no seam touches
     has no flat chart: surface paths answer it on the closed surface (``PathsChart``), unless
     ``method`` is 'grid' (then it needs seams or sphere mode). ``grid``: nodes along the longer UV
     side of every chart (64..4096), None: per chart from ``error_target`` (``default_grid_for_target``).
@@ -1619,10 +1634,12 @@ class GeodesicSolver:
             self.turned = None if F2 is F else (F2 != F).any(1)
             F = self.F = F2
             count, face_island = face_components(F, self.n)
-            # closed parts (no boundary edge) have no flat chart: without seams, surface paths answer
-            # them on the closed surface (``method`` 'grid' keeps the error that asks for seams)
-            shut = closed_parts(F, count, face_island) if seams is None and method != 'grid' else \
-                np.zeros(count, bool)
+            # closed parts (no boundary edge) that no seam touches have no flat chart: surface paths
+            # answer them on the closed surface (``method`` 'grid' keeps the error that asks for seams)
+            shut = np.zeros(count, bool)
+            if method != 'grid':
+                shut = closed_parts(F, count, face_island) & ~_seamed_parts(F, seams, self.n, count,
+                                                                            face_island)
             part = face_island
             shut_cut = 0                                # parts in ``shut`` that are cut open ones
             say(0.0, 'flattening')
