@@ -1,9 +1,10 @@
-"""Folds of a sphere map undone where the surrounding map allows (docs/sphere.md, "Folds").
+"""Folds of a sphere map undone where the surrounding map allows (docs/sphere.md, "Untangling").
 
 The sphere map is harmonic for the intrinsic Delaunay Laplacian (``core.sphere.map``), and it is
 piecewise linear on the *intrinsic* triangles; the faces written out are the mesh's own. An obtuse
 face (one angle of 150-175 degrees) whose vertex lies close to the opposite edge turns over at the
-slightest error in the image of that edge: cheburashka folds 3 of its 13334 faces, a noisy figure 4.
+slightest error in the image of that edge: cheburashka's map folds 4 of its 13334 faces, a noisy
+figure's 4.
 
 ``untangle`` relaxes the vertices around every folded face, ``RINGS`` rings deep, by Gauss-Seidel
 sweeps on the mesh's own conformal energy (its cotan Dirichlet energy: for a fixed ring the signed
@@ -28,10 +29,10 @@ from ..mesh.geometry import face_areas
 
 RINGS = 3          # rings around the folded faces that are relaxed
 SWEEPS = 30        # Gauss-Seidel sweeps over the patch
-KEEP = 0.25       # a face's image keeps at least this fraction of its 3D aspect (2 area / edge^2)
+KEEP = 0.25        # a face's image keeps at least this fraction of its 3D aspect (2 area / edge^2)
 QC_GROWTH = 0.1    # a patch is kept if its area-weighted qc grows by at most 10 % ...
 QC_SLACK = 0.1     # ... or by 0.1
-SCALE_SLACK = 1e-3 # and no face's scale leaves the map's range (of the unfolded faces) by more than 0.1 %
+SCALE_SLACK = 1e-3  # and no face's scale leaves the map's range (of the unfolded faces) by more than 0.1 %
 QP_ENTRIES = 4_000_000  # entries of the batched quadratic programs' largest array (32 MB)
 MAX_FOLDED = 0.02  # above this fraction of folded faces the map is broken throughout (a mesh of
                    # slivers), not locally: no relaxation is tried
