@@ -121,19 +121,12 @@ def glued_pieces(F, Fs, island, seams, n):
     in which the flattening cut more than the seams and the mesh's non-manifold edges do (two islands,
     or two split copies of a vertex, glued together)."""
     m, N = len(F), int(Fs.max()) + 1 if len(Fs) else 0
-    H = np.sort(topology.halfedges(F), axis=1)
-    key = H[:, 0] * n + H[:, 1]
-    order = np.argsort(key, kind='stable')
-    k = key[order]
-    cnt = np.diff(np.r_[np.flatnonzero(np.r_[True, k[1:] != k[:-1]]), len(k)])
-    two = np.repeat(cnt == 2, cnt)                             # per sorted half-edge: its edge has two
-    first = np.flatnonzero(two[:-1] & (k[1:] == k[:-1]))       # the first of each such pair
-    h1, h2 = order[first], order[first + 1]
+    h1, h2, key = topology.two_sided_edges(F, n)
     ok = ~topology.repeated_vertex(F)
     good = ok[h1 // 3] & ok[h2 // 3]
     if seams is not None and len(seams):
         S = np.sort(np.asarray(seams, np.int64), axis=1)
-        good &= ~np.isin(k[first], S[:, 0] * n + S[:, 1])
+        good &= ~np.isin(key, S[:, 0] * n + S[:, 1])
     h1, h2 = h1[good], h2[good]
     t1, t2 = h1 // 3, h2 // 3
     Fr, Sr = F.ravel(), Fs.ravel()

@@ -61,15 +61,8 @@ def edge_table(F, n):
     running the same way (inconsistent orientation). Half-edge 3t+k runs from F[t,k] to F[t,k+1]."""
     F = np.asarray(F, np.int64)
     u = F.ravel()
-    v = F[:, [1, 2, 0]].ravel()
-    key = np.minimum(u, v) * np.int64(n) + np.maximum(u, v)
-    order = np.argsort(key)
-    skey = key[order]
-    first = np.ones(len(key), bool)
-    first[1:] = skey[1:] != skey[:-1]
-    starts = np.flatnonzero(first)
-    counts = np.diff(np.r_[starts, len(key)])
-    ukey = skey[starts]
+    key, order, starts, counts = _sorted_edge_keys(F, n)
+    ukey = key[order][starts]
     E = np.stack([ukey // n, ukey % n], axis=1)
     twin = np.full(len(key), -1, np.int64)
     pair = starts[counts == 2]
@@ -77,6 +70,31 @@ def edge_table(F, n):
     same = u[h0] == u[h1]
     twin[h0[~same]], twin[h1[~same]] = h1[~same], h0[~same]
     return E, counts, twin, int(same.sum())
+
+
+def _sorted_edge_keys(F, n):
+    """The 3m undirected half-edge keys of ``F`` (m,3) on ``n`` vertices (min * n + max), sorted once:
+    ``(key (3m,), order (3m,), starts (e,), counts (e,))``, ``starts`` the first sorted position of
+    each edge and ``counts`` how many half-edges it has."""
+    u = F.ravel()
+    v = F[:, [1, 2, 0]].ravel()
+    key = np.minimum(u, v) * np.int64(n) + np.maximum(u, v)
+    order = np.argsort(key)
+    skey = key[order]
+    first = np.ones(len(key), bool)
+    first[1:] = skey[1:] != skey[:-1]
+    starts = np.flatnonzero(first)
+    return key, order, starts, np.diff(np.r_[starts, len(key)])
+
+
+def two_sided_edges(F, n):
+    """The edges of ``F`` (m,3) on ``n`` vertices held by exactly two triangles, whichever way their
+    half-edges run: ``(h0, h1)`` (e2,) the two half-edges of each (half-edge 3t+k runs from F[t,k] to
+    F[t,k+1]), and ``key`` (e2,) its undirected key min * n + max."""
+    F = np.asarray(F, np.int64)
+    key, order, starts, counts = _sorted_edge_keys(F, n)
+    pair = starts[counts == 2]
+    return order[pair], order[pair + 1], key[order[pair]]
 
 
 def boundary_loops(F, n, twin=None):
