@@ -261,8 +261,9 @@ def conformal_sphere(V: np.ndarray, F: np.ndarray, progress=None) -> tuple:
 
 
 def _count_flips(F, S):
-    P = S[F]
-    return int(((np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]) * P.mean(1)).sum(1) <= 0).sum())
+    """How many faces ``F`` (m,3) the sphere map ``S`` (n,3) folds (``untangle.orientation``)."""
+    from .untangle import orientation
+    return int((orientation(S, F) <= 0).sum())
 
 
 def _flat_mass(X, F):

@@ -187,9 +187,7 @@ def _relax(S, F, verts, Z, W, aspect, real, corners, start):
 def _scale(S, F, A3):
     """(m,) unnormalised scale of each face ``F`` (m,3): sqrt(area of its flat image in ``S`` / its 3D
     area ``A3`` (m,))."""
-    P = S[F]
-    a = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
-    return np.sqrt(a / np.maximum(A3, np.finfo(float).tiny))
+    return np.sqrt(face_areas(S, F) / np.maximum(A3, np.finfo(float).tiny))
 
 
 def untangle(S: np.ndarray, F: np.ndarray, V: np.ndarray, real: np.ndarray | None = None,
