@@ -466,14 +466,15 @@ def test_krylov_newton_reaches_the_same_flat_metric():
 
 def test_fast_paths_equal_the_plain_computations():
     """The big-mesh shortcuts give the same numbers as the plain computations: the weighted 1%/99%
-    tails from ``argpartition`` (``_weighted_quantiles``, one column and a stack) against the full
+    tails (``_weighted_quantiles``, one column and a stack, short rows and long) against the full
     sort, a cut's half-edge twins derived from the mesh's (``_cut_twins``) against
     ``topology.twin_halfedges``, ``is_disk`` with known twins, and the Green's columns in and out of
     their insertion order."""
     from core.atlas.cones import _cut_twins, _weighted_quantiles
     rng = np.random.default_rng(3)
-    for t in range(40):
-        m = int(rng.integers(200, 4000))
+    for t in range(46):
+        # short rows (tails by argpartition, below 2048) and long ones (thresholds from every 8th value)
+        m = int(rng.integers(200, 4000)) if t < 40 else int(rng.integers(4000, 30000))
         X = rng.normal(size=(m, 1 + t % 4))
         X = X if t % 2 else np.round(X, 1)                                       # with ties
         w = rng.exponential(size=m) ** (1 + 2 * (t % 3))                         # uneven weights
@@ -799,3 +800,62 @@ def test_layouts_stop_at_their_budget(monkeypatch):
     assert any(c.get('budget') for c in one.report['angle_candidates'])
     assert one.report['angle_candidates'][0]['angles'] == full.report['angle_candidates'][0]['angles']
     assert not any('tries' in w for w in one.report['warnings'])       # clean: nothing to warn about
+
+
+def test_bordered_and_pinned_solves_equal_the_systems_one_by_one():
+    """The screens' shared factorisations (``bordered_solve``: one block common to every candidate's
+    KKT system, bordered by its own row; ``pinned_solves``: one inverse for every cone held at 0) give
+    the solutions of the systems solved one at a time, also where they fall back to the stack (a
+    common block that is singular but for the regularisation: a closed surface's first cone)."""
+    from core.atlas.cones import bordered_solve, pinned_solves
+    rng = np.random.default_rng(5)
+    for p, c, singular in ((6, 9, False), (20, 40, False), (2, 7, True)):
+        G = rng.normal(size=(50, p + c))
+        M = G.T @ G
+        A0, B, d = M[:p, :p].copy(), M[:p, p:], np.diag(M)[p:].copy()
+        if singular:
+            A0[:] = [[1.0, 0.0], [0.0, 0.0]]           # the constant and the sum rule's multiplier
+            B = np.r_[np.zeros((1, c)), np.ones((1, c))]
+        r0, r = rng.normal(size=p), rng.normal(size=c)
+        y, z = bordered_solve(A0, B, d, r0, r)
+        eps = 1e-12 * max(np.abs(A0).max(), np.abs(B).max(), np.abs(d).max())
+        for j in range(c):
+            K = np.block([[A0, B[:, j:j + 1]], [B[:, j:j + 1].T, d[j:j + 1, None]]]) + eps * np.eye(p + 1)
+            x = np.linalg.solve(K, np.r_[r0, r[j]])
+            assert np.allclose(y[j], x[:p], rtol=1e-8, atol=1e-8 * np.abs(x).max())
+            assert np.isclose(z[j], x[p], rtol=1e-8, atol=1e-8 * np.abs(x).max())
+    for size, k in ((8, 6), (30, 28)):
+        G = rng.normal(size=(60, size))
+        K, rhs = G.T @ G, rng.normal(size=size)
+        X = pinned_solves(K, rhs, k)
+        eps = 1e-12 * max(np.abs(K).max(), 1.0)
+        for i in range(k):
+            keep = np.arange(size) != i
+            x = np.zeros(size)
+            x[keep] = np.linalg.solve((K + eps * np.eye(size))[keep][:, keep], rhs[keep])
+            assert np.allclose(X[i], x, rtol=1e-8, atol=1e-9 * np.abs(x).max())
+
+
+def test_cached_column_products_equal_the_direct_ones(monkeypatch):
+    """``ConeSystem.gram`` keeps the area-weighted products of the Green's columns per vertex and per
+    pair; over a sequence of cone sets like a placement's (one cone moved at a time, sets that
+    overflow the table and the column store) they equal the products computed afresh."""
+    import core.atlas.cones as cones_mod
+    monkeypatch.setattr(cones_mod, 'GRAM_VERTICES', 24)
+    monkeypatch.setattr(cones_mod, 'COLUMN_BYTES', 8 * 30 * 642)
+    V, F = blob(8)
+    system = ConeSystem(V, F)
+    w = system.vertex_area / system.vertex_area.sum()
+    rng = np.random.default_rng(2)
+    S = list(rng.choice(system.n, 6, replace=False))
+    for step in range(40):
+        if step % 10 == 9:
+            S = list(rng.choice(system.n, 12, replace=False))       # a new set: the table overflows
+        else:
+            S[int(rng.integers(len(S)))] = int(rng.integers(system.n))
+            S = list(dict.fromkeys(S))
+        M, m, b = system.gram(S)
+        G = system.columns(S)
+        assert np.allclose(M, G.T @ (w[:, None] * G), rtol=1e-12, atol=1e-14)
+        assert np.allclose(m, G.T @ w, rtol=1e-12, atol=1e-14)
+        assert np.allclose(b, G.T @ (w * system.u0), rtol=1e-12, atol=1e-14)

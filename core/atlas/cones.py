@@ -86,6 +86,8 @@ MAX_LAYOUTS = 24                   # exact layouts of angle candidates in one ``
                                    # 1-7 on the corpus and its head cuts, 20 on the cow (its tail);
                                    # a noisy scan whose every layout folds ran through 56 of them,
                                    # 3.6 s each (docs/cones.md, "Noisy scans")
+QUANTILE_STRIDE = 8                # long rows: the tails' thresholds from every 8th value
+QUANTILE_STRIDE_MIN = 256          # ... of rows of at least 8 * 256 values (``_tails``)
 VERIFY = 3                         # screened candidates (moves, greedy look-ahead) scored exactly
 MOVE_RADIUS = 2                    # cone moves: each cone tries the vertices within this many edges
 MOVE_SWEEPS = 16                   # ... in passes until none moves (then one pass a ring wider), at most
@@ -107,6 +109,7 @@ SKIP_MARGIN = 0.02                 # an angle candidate whose estimate is this f
                                    # ratio of the best clean layout is not laid out (realised ratios
                                    # stayed within +0.012 of their estimates on every corpus row)
 COLUMN_BYTES = 512 << 20            # the Green's columns kept at most (bytes; ``ConeSystem.columns``)
+GRAM_VERTICES = 1024               # vertices in the table of their columns' products (``ConeSystem.gram``)
 SPARSE_POOL = 3                    # the L2 start places SPARSE_POOL times the cones, then thins them
 
 
@@ -174,9 +177,11 @@ class ConeSystem:
         self._cols = {}                # vertex -> its row in self._Gt (the Green's columns solved so far)
         self._Gt = np.empty((0, n))
         self._last = (None, None)      # the last ``columns`` request and its answer (half repeat it)
+        self._gram_pos = None          # vertex -> its row in the table of products (``gram``)
         self.u0 = self.solve(-self.Omega)
         # per-vertex area (a third of the incident triangles), for area-weighted statistics
         self.vertex_area = np.bincount(F.ravel(), np.repeat(self.A / 3, 3), minlength=n)
+        self._w = self.vertex_area / self.vertex_area.sum()
         # a negative cone widens its corners by about (2*pi - kappa) / (angle sum): an obtuse corner
         # (a needle's) at a cone must stay below pi - CORNER_MARGIN, or the input triangle comes out
         # reflex and flips (cheburashka). Lower bound per vertex on kappa, (n,) radians.
@@ -206,6 +211,18 @@ class ConeSystem:
         S = [int(s) for s in S]
         if tuple(S) == self._last[0]:
             return self._last[1]
+        self._solve_columns(S)
+        if not S:
+            return np.zeros((self.n, 0))
+        idx = [self._cols[s] for s in S]
+        rows = self._Gt[:len(idx)] if idx == list(range(len(idx))) else self._Gt[idx]
+        G = np.ascontiguousarray(rows.T)
+        self._last = (tuple(S), G)
+        return G
+
+    def _solve_columns(self, S):
+        """Solve and store the Green's columns of the vertices ``S`` (list of int) not stored yet;
+        afterwards every one of ``S`` has its row ``self._cols[s]`` in ``self._Gt``."""
         new = list(dict.fromkeys(s for s in S if s not in self._cols))
         if new:
             B = np.zeros((self.n, len(new)))
@@ -227,13 +244,48 @@ class ConeSystem:
             self._Gt[k0:k0 + len(new)] = X.T
             for j, s in enumerate(new):
                 self._cols[s] = k0 + j
-        if not S:
-            return np.zeros((self.n, 0))
-        idx = [self._cols[s] for s in S]
-        rows = self._Gt[:len(idx)] if idx == list(range(len(idx))) else self._Gt[idx]
-        G = np.ascontiguousarray(rows.T)
-        self._last = (tuple(S), G)
-        return G
+
+    def gram(self, S):
+        """The area-weighted products of the cones' Green's columns ``g_s`` (``columns``): ``(M (k,k),
+        m (k,), b (k,))`` with ``M[i, j] = sum_v w_v g_i(v) g_j(v)``, ``m[i] = sum_v w_v g_i(v)`` and
+        ``b[i] = sum_v w_v g_i(v) u0(v)``, ``w`` the vertex areas normalised to sum 1. Each product is
+        computed once and kept per vertex and per pair of vertices (a cone move changes one column:
+        k new products, not k^2 over all n vertices), in a table of at most ``GRAM_VERTICES``
+        vertices that starts again when full."""
+        S = [int(s) for s in S]
+        k = len(S)
+        pos = self._gram_pos
+        if pos is None or len(set(S) - pos.keys()) + len(pos) > GRAM_VERTICES:     # (start again)
+            cap = max(GRAM_VERTICES, k)
+            self._gram_pos = {}
+            self._gram_M = np.full((cap, cap), np.nan)
+            self._gram_m, self._gram_b = np.empty(cap), np.empty(cap)
+        pos = self._gram_pos
+        new = [s for s in dict.fromkeys(S) if s not in pos]
+        self._solve_columns(S)
+        if new:
+            rows = self._Gt[[self._cols[s] for s in new]]           # (r, n)
+            j0 = len(pos)
+            self._gram_m[j0:j0 + len(new)] = rows @ self._w
+            self._gram_b[j0:j0 + len(new)] = rows @ (self._w * self.u0)
+            for j, s in enumerate(new):
+                pos[s] = j0 + j
+        idx = np.array([pos[s] for s in S], np.int64)
+        M = self._gram_M[np.ix_(idx, idx)]
+        miss = np.isnan(M)
+        if miss.any():
+            # the missing products, a row of cones at a time (each against the cones it lacks)
+            for i in np.nonzero(miss.any(1))[0].tolist():
+                js = np.nonzero(miss[i])[0]
+                if not len(js):
+                    continue
+                gi = self._Gt[self._cols[S[i]]] * self._w
+                vals = self._Gt[[self._cols[S[j]] for j in js.tolist()]] @ gi
+                self._gram_M[idx[i], idx[js]] = vals
+                self._gram_M[idx[js], idx[i]] = vals
+                miss[i, js] = miss[js, i] = False
+            M = self._gram_M[np.ix_(idx, idx)]
+        return M, self._gram_m[idx], self._gram_b[idx]
 
     def u_of(self, S, kappa):
         """Log scale u (n,) with curvature ``kappa`` (k,) at cones ``S`` (k,)."""
@@ -270,10 +322,18 @@ class ConeSystem:
             return np.zeros(0)
         lo = np.maximum(self.bounds[0] if lower is None else lower, self.kappa_floor[S])
         hi = np.maximum(self.bounds[1] if upper is None else upper, lo)
-        w = self.vertex_area / self.vertex_area.sum()
-        A = np.c_[self.columns(S), -np.ones(self.n)]            # u - c = u0 + A [kappa; c]
-        M = A.T @ (w[:, None] * A)
-        g = A.T @ (w * (self.u0 if shift is None else self.u0 + shift))
+        # u - c = u0 + A [kappa; c] with A = [G, -1]: M = A^T W A and g = A^T W (u0 + shift) from the
+        # columns' cached products (``gram``)
+        w = self._w
+        Mg, mg, bg = self.gram(S)
+        M = np.empty((k + 1, k + 1))
+        M[:k, :k] = Mg
+        M[:k, k] = M[k, :k] = -mg
+        M[k, k] = w.sum()
+        u = self.u0 if shift is None else self.u0 + shift
+        g = np.r_[bg, -(w @ u)]
+        if shift is not None:
+            g[:k] += self._Gt[[self._cols[s] for s in S.tolist()]] @ (w * shift)
         # ||W^1/2 (u0 + A x)||^2 = ||R x + R^-T g||^2 + const with M = R^T R (eigen square root:
         # M is only semidefinite without cones that move u)
         ev, Q = np.linalg.eigh(M)
@@ -400,28 +460,29 @@ def _weighted_quantiles(X, weights, q):
     """The weighted ``q`` and ``1 - q`` quantiles of every row of ``X`` (c,m), for each of the
     nonnegative weight vectors ``weights`` (sequence of (m,)): a list of (lo, hi), (c,) each, lo the
     first value in increasing order whose cumulative weight reaches ``q`` of the total, hi the first
-    reaching ``1 - q``. (Rows: each sample's values are contiguous, which the partition and the
+    reaching ``1 - q``. (Rows: each sample's values are contiguous, which the selection and the
     gathers below read along; the numbers are those of the same computation down columns.)
 
-    Only the two tails are sorted, once for all the weightings: ``np.argpartition`` picks the ``k``
-    lowest and ``k`` highest values of every row, ``k`` doubled until each tail holds more than
-    ``q`` of every weighting's total; O(m) instead of a full sort's O(m log m), with the same numbers
-    (``face_spread`` runs once per greedy cone on big meshes, ``_batch_spread`` on every screened
-    candidate: the full sort took a quarter of a one-click unwrap on small meshes, cheburashka 11 of
-    40 s). A tail that would need more than half of the values falls back to the full sort."""
+    Only the two tails are sorted, once for all the weightings (``face_spread`` runs once per greedy
+    cone on big meshes, ``_batch_spread`` on every screened candidate: the full sort took a quarter of
+    a one-click unwrap on small meshes, cheburashka 11 of 40 s). Each tail holds the values beyond a
+    threshold per row, taken at about ``k`` values from the end: from every ``QUANTILE_STRIDE``-th
+    value of a long row (a partition of an eighth of it: the partition of the whole row was a fifth
+    of a placement), else by ``np.argpartition``. ``k`` is doubled until each tail holds more than
+    ``q`` of every weighting's total; a tail that would need more than half of the values falls back
+    to the full sort. The tails are sorted and summed from their ends, so the numbers are those of
+    the full sort (``test_fast_paths_equal_the_plain_computations``)."""
     nrow, m = X.shape
     rows = np.arange(nrow)
     totals = [float(w.sum()) for w in weights]
-    k = min(m, int(4 * q * m) + 64)
+    padded = [np.r_[w, 0.0] for w in weights]           # index m: the padding of a short tail
+    k = min(m, int(2 * q * m) + 32)
     while 2 * k <= m:
-        part = np.argpartition(X, (k - 1, m - k), axis=1)
-        lo_i, hi_i = part[:, :k], part[:, m - k:]
-        if all((w[lo_i].sum(1) > q * t * (1 + 1e-9)).all() and (w[hi_i].sum(1) > q * t * (1 + 1e-9)).all()
-               for w, t in zip(weights, totals)):
-            o_lo = np.take_along_axis(lo_i, np.argsort(np.take_along_axis(X, lo_i, 1), axis=1), 1)
-            o_hi = np.take_along_axis(hi_i, np.argsort(-np.take_along_axis(X, hi_i, 1), axis=1), 1)
+        tails = _tails(X, k)
+        if all((w[t].sum(1) > q * tot * (1 + 1e-9)).all() for t in tails for w, tot in zip(padded, totals)):
+            o_lo, o_hi = tails
             out = []
-            for w, t in zip(weights, totals):
+            for w, t in zip(padded, totals):
                 j = (np.cumsum(w[o_lo], axis=1) < q * t).sum(1)       # the first reaching q of the weight
                 j1 = (np.cumsum(w[o_hi], axis=1) <= q * t).sum(1)     # from the top: 1 - q reached
                 out.append((X[rows, o_lo[rows, j]], X[rows, o_hi[rows, j1]]))
@@ -434,6 +495,36 @@ def _weighted_quantiles(X, weights, q):
         c /= c[:, -1:]
         out.append((X[rows, order[rows, (c < q).sum(1).clip(0, m - 1)]],
                     X[rows, order[rows, (c < 1 - q).sum(1).clip(0, m - 1)]]))
+    return out
+
+
+def _tails(X, k):
+    """The low and the high tail of every row of ``X`` (c,m), at least about ``k`` values each: index
+    arrays (c, t) into the row, the low tail in increasing order of value, the high one in decreasing
+    order, padded at the end with ``m``."""
+    nrow, m = X.shape
+    if m < QUANTILE_STRIDE * QUANTILE_STRIDE_MIN:
+        part = np.argpartition(X, (k - 1, m - k), axis=1)
+        lo_i, hi_i = part[:, :k], part[:, m - k:]
+        return (np.take_along_axis(lo_i, np.argsort(np.take_along_axis(X, lo_i, 1), axis=1), 1),
+                np.take_along_axis(hi_i, np.argsort(-np.take_along_axis(X, hi_i, 1), axis=1), 1))
+    sub = X[:, ::QUANTILE_STRIDE]
+    ks = max(k // QUANTILE_STRIDE, 1)
+    ms = sub.shape[1]
+    part = np.partition(sub, (ks - 1, ms - ks), axis=1)
+    lo_t, hi_t = part[:, ks - 1:ks], part[:, ms - ks:ms - ks + 1]
+    r, c = np.nonzero((X <= lo_t) | (X >= hi_t))        # both tails in one pass
+    v = X[r, c]
+    out = []
+    for side in (v <= lo_t[r, 0], v >= hi_t[r, 0]):
+        rs, cs = r[side], c[side]
+        cnt = np.bincount(rs, minlength=nrow)
+        pos = np.arange(len(rs)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        idx = np.full((nrow, int(cnt.max(initial=1))), m)
+        idx[rs, pos] = cs
+        key = np.full(idx.shape, np.inf)
+        key[rs, pos] = v[side] if not out else -v[side]
+        out.append(np.take_along_axis(idx, np.argsort(key, axis=1), 1))
     return out
 
 
@@ -520,6 +611,68 @@ def _batch_spread(F, A, U, q=1.0):
     return np.exp(np.minimum(lo - hi, lo1 - hi1))
 
 
+def bordered_solve(A0, B, d, r0, r):
+    """Solve, for each column ``c`` of ``B``, the symmetric system ``[[A0, b], [b^T, d_c]] [y; z] =
+    [r0; r_c]`` with ``b = B[:, c]``: one factorisation of the common block ``A0`` (p,p) for all the
+    bordered systems (block elimination: ``z = (r_c - b.A0^-1 r0) / (d_c - b.A0^-1 b)``, ``y = A0^-1
+    (r0 - b z)``) instead of one of each (p+1, p+1) system. B (p,c), d (c,), r0 (p,), r (c,). Every
+    system's diagonal gets ``1e-12`` times the largest entry of all of them (the regularisation the
+    stacked systems had). Returns (y (c,p), z (c,)), or None if a system is singular. A common block
+    too ill-conditioned for the elimination (a closed surface's first cone: only the constant and
+    the multiplier) is solved system by system, as a stack."""
+    p, c = B.shape
+    eps = 1e-12 * max(np.abs(A0).max(initial=0.0), np.abs(B).max(initial=0.0), np.abs(d).max(initial=0.0))
+    A = A0 + eps * np.eye(p)
+    dd = d + eps
+    if p and np.linalg.cond(A) < 1e8:
+        Y = np.linalg.solve(A, np.c_[r0, B])
+        y0, Z = Y[:, 0], Y[:, 1:]
+        s = dd - np.einsum('pc,pc->c', B, Z)           # the Schur complements
+        if (np.abs(s) > 1e-8 * np.abs(dd)).all():
+            z = (r - B.T @ y0) / s
+            return (y0[None] - (Z * z).T), z
+    K = np.zeros((c, p + 1, p + 1))
+    K[:, :p, :p] = A
+    K[:, :p, p] = K[:, p, :p] = B.T
+    K[:, p, p] = dd
+    rhs = np.c_[np.broadcast_to(r0, (c, p)), r]
+    try:
+        x = np.linalg.solve(K, rhs[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return None
+    return x[:, :p], x[:, p]
+
+
+def pinned_solves(K, rhs, k):
+    """The solutions (k, p) of the symmetric system ``K x = rhs`` (K (p,p), rhs (p,)) with, in turn,
+    each of the first ``k`` unknowns held at 0 (its row and column replaced by the identity's), every
+    diagonal regularised by ``1e-12`` times the largest entry. One inverse serves all of them: with
+    ``x = K^-1 rhs``, holding unknown ``i`` gives ``x - K^-1[:, i] x_i / K^-1[i, i]``. A ``K`` too
+    ill-conditioned for that is solved system by system. Returns None if a system is singular."""
+    p = len(rhs)
+    eps = 1e-12 * max(np.abs(K).max(), 1.0)
+    Kr = K + eps * np.eye(p)
+    if np.linalg.cond(Kr) < 1e8:
+        Ki = np.linalg.inv(Kr)
+        x = Ki @ rhs
+        piv = np.diag(Ki)[:k]
+        if (np.abs(piv) > 1e-8 * np.abs(Ki).max()).all():
+            X = x[None] - (Ki[:, :k] * (x[:k] / piv)).T
+            X[np.arange(k), np.arange(k)] = 0.0
+            return X
+    i = np.arange(k)
+    Ks = np.repeat(Kr[None], k, axis=0)
+    Ks[i, i, :] = 0.0
+    Ks[i, :, i] = 0.0
+    Ks[i, i, i] = 1.0 + eps
+    R = np.repeat(rhs[None], k, axis=0)
+    R[i, i] = 0.0
+    try:
+        return np.linalg.solve(Ks, R[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        return None
+
+
 def _screen_moves(system, S, kap, i, cand):
     """Approximate spread (c,) of moving cone ``S[i]`` to each vertex of ``cand`` (c,) (``_screen``
     with the other cones and their angles)."""
@@ -550,28 +703,20 @@ def _screen(system, others, ko, cand):
     gWg = np.einsum('ic,ic->c', Gc, w[:, None] * Gc)
     PtWr = WP.T @ r0
     gWr = Gc.T @ (w * r0)
-    c = len(cand)
-    size = f1 + 1 + (1 if system.needs_sum else 0)
-    K = np.zeros((c, size, size))
-    K[:, :f1, :f1] = PtWP
-    K[:, :f1, f1] = PtWG.T
-    K[:, f1, :f1] = PtWG.T
-    K[:, f1, f1] = gWg
-    rhs = np.zeros((c, size))
-    rhs[:, :f1] = -PtWr
-    rhs[:, f1] = -gWr
+    # the KKT system of each candidate: the block of the others' free angles, the constant and (closed)
+    # the sum rule's multiplier, common to all, bordered by the candidate's own row
+    A0 = np.zeros((f1 + 1, f1 + 1)) if system.needs_sum else PtWP.copy()
+    r0_c = -PtWr
     if system.needs_sum:
-        e = np.r_[np.ones(f1 - 1), 0.0, 1.0]
-        K[:, :f1 + 1, -1] = e
-        K[:, -1, :f1 + 1] = e
-        rhs[:, -1] = system.total - ko[at_bound].sum()
-    K[:, np.arange(size), np.arange(size)] += 1e-12 * np.abs(K).max()
-    try:
-        x = np.linalg.solve(K, rhs[..., None])[..., 0]          # (c, size)
-    except np.linalg.LinAlgError:
-        return np.zeros(c)
-    kv = np.clip(x[:, f1], np.maximum(blo, system.kappa_floor[cand]), bhi)
-    kf = np.clip(x[:, :f1 - 1], lo_o[~at_bound], bhi)
+        A0[:f1, :f1] = PtWP
+        A0[:f1 - 1, f1] = A0[f1, :f1 - 1] = 1.0
+        r0_c = np.r_[-PtWr, system.total - ko[at_bound].sum()]
+    B = PtWG if not system.needs_sum else np.r_[PtWG, np.ones((1, len(cand)))]
+    x = bordered_solve(A0, B, gWg, r0_c, -gWr)
+    if x is None:
+        return np.zeros(len(cand))
+    kv = np.clip(x[1], np.maximum(blo, system.kappa_floor[cand]), bhi)
+    kf = np.clip(x[0][:, :f1 - 1], lo_o[~at_bound], bhi)
     U = r0[:, None] + Go[:, ~at_bound] @ kf.T + Gc * kv
     return _batch_spread(system.F, system.A, U)
 
@@ -626,7 +771,7 @@ def _peaks(system, kap, count, depth=2):
 def _screen_removals(system, S):
     """Approximate spread (k,) of the cones ``S`` (list) without each one in turn: the area-L2 angles of
     the rest, without bounds, solved as a stack of KKT systems of size about k (the removed cone's
-    angle held at 0). ``_score`` checks the best few."""
+    angle held at 0: ``pinned_solves``). ``_score`` checks the best few."""
     n, k = system.n, len(S)
     w = system.vertex_area / system.vertex_area.sum()
     G = system.columns(S)
@@ -634,23 +779,15 @@ def _screen_removals(system, S):
     M = P.T @ (w[:, None] * P)
     g = P.T @ (w * system.u0)
     size = k + 1 + (1 if system.needs_sum else 0)
-    K = np.zeros((k, size, size))
-    K[:, :k + 1, :k + 1] = M
-    rhs = np.zeros((k, size))
-    rhs[:, :k + 1] = -g
+    K = np.zeros((size, size))
+    K[:k + 1, :k + 1] = M
+    rhs = np.zeros(size)
+    rhs[:k + 1] = -g
     if system.needs_sum:
-        K[:, :k, -1] = 1.0
-        K[:, -1, :k] = 1.0
-        rhs[:, -1] = system.total
-    i = np.arange(k)
-    K[i, i, :] = 0.0
-    K[i, :, i] = 0.0
-    K[i, i, i] = 1.0
-    rhs[i, i] = 0.0
-    K[:, np.arange(size), np.arange(size)] += 1e-12 * np.abs(K).max()
-    try:
-        x = np.linalg.solve(K, rhs[..., None])[..., 0]
-    except np.linalg.LinAlgError:
+        K[:k, -1] = K[-1, :k] = 1.0
+        rhs[-1] = system.total
+    x = pinned_solves(K, rhs, k)
+    if x is None:
         return np.zeros(k)
     U = system.u0[:, None] + G @ x[:, :k].T
     return _batch_spread(system.F, system.A, U)
