@@ -245,6 +245,13 @@ class ConeSystem:
             for j, s in enumerate(new):
                 self._cols[s] = k0 + j
 
+    def rows(self, S):
+        """(k,n) the Green's columns of the vertices ``S`` as rows (a gather of the store's rows: no
+        transposed copy, unlike ``columns``)."""
+        S = [int(s) for s in S]
+        self._solve_columns(S)
+        return self._Gt[[self._cols[s] for s in S]]
+
     def gram(self, S):
         """The area-weighted products of the cones' Green's columns ``g_s`` (``columns``): ``(M (k,k),
         m (k,), b (k,))`` with ``M[i, j] = sum_v w_v g_i(v) g_j(v)``, ``m[i] = sum_v w_v g_i(v)`` and
@@ -605,7 +612,11 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
 def _batch_spread(F, A, U, q=1.0):
     """``face_spread`` of every column of ``U`` (n,c) at once (the worse of the area-weighted and the
     per-triangle spreads). Returns (c,)."""
-    Ut = np.ascontiguousarray(U.T)                              # (c,n): the face means row by row
+    return _batch_spread_rows(F, A, np.ascontiguousarray(U.T), q)
+
+
+def _batch_spread_rows(F, A, Ut, q=1.0):
+    """``_batch_spread`` of the rows of ``Ut`` (c,n), C-ordered (the face means are gathered row by row)."""
     M = (Ut[:, F[:, 0]] + Ut[:, F[:, 1]] + Ut[:, F[:, 2]]) / 3.0  # = face_means(U, F).T, to the bit
     (lo, hi), (lo1, hi1) = _weighted_quantiles(M, (A, np.ones(len(F))), q / 100)
     return np.exp(np.minimum(lo - hi, lo1 - hi1))
@@ -683,29 +694,38 @@ def _screen(system, others, ko, cand):
     """Approximate spread (c,) of adding a cone at each vertex of ``cand`` (c,) to the cones
     ``others`` (list) with angles ``ko`` (k,): the area-L2 angles re-solved in one batch with the
     cones now at a bound held there (the active set of ``ko``) and the new cone's angle then clipped
-    to its bounds; one KKT system of size about k per candidate (``np.linalg.solve`` on the stack).
-    Exact when no bound is active. ``_score`` checks the best few."""
+    to its bounds; one KKT system of size about k per candidate, all bordering one common block
+    (``bordered_solve``). Exact when no bound is active. ``_score`` checks the best few. The
+    columns are read as the store's rows (``ConeSystem.rows``), so the candidates' log scales come
+    out row by row, as ``_batch_spread_rows`` reads them."""
     n = system.n
-    w = system.vertex_area / system.vertex_area.sum()
+    w = system._w
     others = np.asarray(others, np.int64)
     ko = np.asarray(ko, np.float64)
     blo, bhi = system.bounds
     lo_o = np.maximum(blo, system.kappa_floor[others])
     at_bound = (np.abs(ko - lo_o) < 1e-7) | (np.abs(ko - bhi) < 1e-7)
-    Go = system.columns(others) if len(others) else np.zeros((n, 0))
-    r0 = system.u0 + Go[:, at_bound] @ ko[at_bound]
-    P = np.c_[Go[:, ~at_bound], -np.ones(n)]                    # (n, f+1): free angles, the constant
-    Gc = system.columns(cand)                                   # (n,c) the candidates' columns (cached)
-    f1 = P.shape[1]
-    WP = w[:, None] * P
-    PtWP = P.T @ WP
-    PtWG = WP.T @ Gc                                            # (f+1, c)
-    gWg = np.einsum('ic,ic->c', Gc, w[:, None] * Gc)
-    PtWr = WP.T @ r0
-    gWr = Gc.T @ (w * r0)
+    R = system.rows(others) if len(others) else np.zeros((0, n))       # (k, n)
+    r0 = system.u0 + ko[at_bound] @ R[at_bound]
+    Rf = R[~at_bound]                                                  # (f, n): the free angles
+    C = system.rows(cand)                                              # (c, n) the candidates' columns
+    WC = C * w
+    f1 = len(Rf) + 1                                                   # the free angles, the constant
+    # P = [G_free, -1] (n, f+1): P^T W P from the cached products, P^T W g and P^T W r0 from the rows
+    PtWP = np.empty((f1, f1))
+    if len(Rf):
+        Mg, mg, _ = system.gram(others[~at_bound])
+        PtWP[:-1, :-1] = Mg
+        PtWP[:-1, -1] = PtWP[-1, :-1] = -mg
+    PtWP[-1, -1] = w.sum()
+    PtWG = np.r_[Rf @ WC.T, -WC.sum(1)[None]]                           # (f+1, c)
+    gWg = np.einsum('cn,cn->c', C, WC)
+    wr = w * r0
+    PtWr = np.r_[Rf @ wr, -wr.sum()]
+    gWr = C @ wr
     # the KKT system of each candidate: the block of the others' free angles, the constant and (closed)
     # the sum rule's multiplier, common to all, bordered by the candidate's own row
-    A0 = np.zeros((f1 + 1, f1 + 1)) if system.needs_sum else PtWP.copy()
+    A0 = np.zeros((f1 + 1, f1 + 1)) if system.needs_sum else PtWP
     r0_c = -PtWr
     if system.needs_sum:
         A0[:f1, :f1] = PtWP
@@ -717,8 +737,8 @@ def _screen(system, others, ko, cand):
         return np.zeros(len(cand))
     kv = np.clip(x[1], np.maximum(blo, system.kappa_floor[cand]), bhi)
     kf = np.clip(x[0][:, :f1 - 1], lo_o[~at_bound], bhi)
-    U = r0[:, None] + Go[:, ~at_bound] @ kf.T + Gc * kv
-    return _batch_spread(system.F, system.A, U)
+    Ut = r0[None] + kf @ Rf + kv[:, None] * C                          # (c, n)
+    return _batch_spread_rows(system.F, system.A, Ut)
 
 
 def sparse_curvature(system, lam=SPARSE_LAMBDA, iters=SPARSE_ITERS, eps=(1.0, 1e-3)):
