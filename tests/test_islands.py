@@ -91,6 +91,19 @@ def test_slit_seam_opens_a_closed_sphere_into_one_disk():
     assert res.report['flips'] == 0 and res.report['overlaps'] == 0
 
 
+def test_a_seam_that_does_not_open_a_closed_mesh_is_named_in_the_error():
+    """One seam edge (or edges apart) on a closed surface opens nothing: the error says so, beside its
+    remedy, rather than only that the island has no boundary."""
+    V, F, S = uv_sphere(16, 32)
+    meridian = S[32:]
+    for seams, count in ((meridian[3:4], 1), (meridian[[2, 6, 10]], 3)):
+        with pytest.raises(ConformalError, match=rf'the {count} seam edge\(s\) marked on it do not cut it'):
+            unwrap(V, F, seams, boundary='area')
+    with pytest.raises(ConformalError) as exc:                         # no seam: the plain message
+        unwrap(V, F, boundary='area')
+    assert 'seam edge(s) marked' not in str(exc.value)
+
+
 def test_components_are_islands_without_seams():
     V, F = grid(5)
     V2 = np.vstack([V, V + [3.0, 0, 0]])

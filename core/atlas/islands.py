@@ -182,6 +182,25 @@ class IslandsResult:
         return self.uv[self.F]
 
 
+def _seam_edges_per_island(F, seams, island_faces):
+    """(islands,) int: how many of the edges ``seams`` (k,2) of the triangles ``F`` (m,3) lie in each
+    island (``island_faces``: list of the triangles of each)."""
+    count = np.zeros(len(island_faces), np.int64)
+    if not len(seams):
+        return count
+    n = int(F.max()) + 1
+    island = np.zeros(len(F), np.int64)
+    for i, faces in enumerate(island_faces):
+        island[faces] = i
+    H = np.sort(topology.halfedges(F), axis=1)
+    S = np.sort(seams, axis=1)
+    on = np.isin(H[:, 0] * n + H[:, 1], S[:, 0] * n + S[:, 1])
+    # an edge counts once per island (its two half-edges are in the same island when it opened nothing)
+    pairs = np.unique(np.c_[island[np.flatnonzero(on) // 3], H[on]], axis=0)
+    np.add.at(count, pairs[:, 0], 1)
+    return count
+
+
 def _describe(i, n_isl, faces, tri_poly):
     what = f"polygon {int(tri_poly[faces[0]])}" if tri_poly is not None else f"triangle {int(faces[0])}"
     return f"island {i + 1} of {n_isl} ({len(faces)} triangles, e.g. {what})"
@@ -662,6 +681,7 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
     cut = cut_along_seams(R.F, n2, seams2, strict=False)
     island_faces = cut.island_faces()
     n_cut = cut.n_islands
+    seam_count = _seam_edges_per_island(R.F, seams2, island_faces)
     weights = np.cumsum([0] + [len(f) for f in island_faces]) / max(1, len(R.F))
     tri_of = R.face_map                                  # input face of each repaired face
     pieces = []                                          # (faces of R.F, Fp, vert_of (input), uv, rep)
@@ -689,6 +709,11 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
             for fl, Fp, pv, ui, r in got:
                 pieces.append((faces[fl], Fp, R.vert_map[cut.vert_of[lo + pv]], ui, r, desc))
         except ConformalError as exc:
+            if exc.code == 'no_boundary' and seam_count[i]:
+                # seams were marked on it, but none opens it (single edges, or edges apart)
+                exc = ConformalError(f"{exc.problem}: the {seam_count[i]} seam edge(s) marked on it do not "
+                                     "cut it open (a seam opens a closed surface only along a path of two "
+                                     "edges or more)", exc.code, exc.remedy)
             if not exc.problem.startswith('island '):
                 exc = exc.with_context(desc)
             if on_error == 'raise' or n_cut == 1:
