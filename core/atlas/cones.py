@@ -617,7 +617,11 @@ def _batch_spread(F, A, U, q=1.0):
 
 def _batch_spread_rows(F, A, Ut, q=1.0):
     """``_batch_spread`` of the rows of ``Ut`` (c,n), C-ordered (the face means are gathered row by row)."""
-    M = (Ut[:, F[:, 0]] + Ut[:, F[:, 1]] + Ut[:, F[:, 2]]) / 3.0  # = face_means(U, F).T, to the bit
+    # = face_means(U, F).T, to the bit: the corners summed in place in the same order (no temporaries)
+    M = np.take(Ut, F[:, 0], axis=1)
+    M += np.take(Ut, F[:, 1], axis=1)
+    M += np.take(Ut, F[:, 2], axis=1)
+    M /= 3.0
     (lo, hi), (lo1, hi1) = _weighted_quantiles(M, (A, np.ones(len(F))), q / 100)
     return np.exp(np.minimum(lo - hi, lo1 - hi1))
 
