@@ -281,11 +281,11 @@ class ConeSystem:
         M = self._gram_M[np.ix_(idx, idx)]
         miss = np.isnan(M)
         if miss.any():
-            # the missing products, a row of cones at a time (each against the cones it lacks)
-            for i in np.nonzero(miss.any(1))[0].tolist():
+            # the missing products, the cone that lacks most first (a moved cone: its row and column
+            # at once), each against the cones it lacks
+            while miss.any():
+                i = int(np.argmax(miss.sum(1)))
                 js = np.nonzero(miss[i])[0]
-                if not len(js):
-                    continue
                 gi = self._Gt[self._cols[S[i]]] * self._w
                 vals = self._Gt[[self._cols[S[j]] for j in js.tolist()]] @ gi
                 self._gram_M[idx[i], idx[js]] = vals
