@@ -37,6 +37,22 @@ class Cut:
         return np.split(order, cuts)
 
 
+def seam_edge_counts(F, seams, n, count, part):
+    """(count,) int: how many of the edges ``seams`` ((k,2) vertex pairs on ``n`` vertices, or None;
+    checked by ``seam_pairs``) lie in each part of the triangles ``F`` (m,3), ``part`` (m,) the part
+    of each triangle. An edge counts once per part it lies in."""
+    out = np.zeros(count, np.int64)
+    S = np.sort(seam_pairs(seams, n), axis=1)
+    if not len(S):
+        return out
+    from ..mesh.topology import halfedges
+    H = np.sort(halfedges(F), axis=1)
+    on = np.isin(H[:, 0] * n + H[:, 1], S[:, 0] * n + S[:, 1])
+    pairs = np.unique(np.c_[np.asarray(part)[np.flatnonzero(on) // 3], H[on]], axis=0)
+    np.add.at(out, pairs[:, 0], 1)
+    return out
+
+
 def seam_pairs(seams, n):
     """Check seams and return them as (k,2) int64 vertex pairs. ``seams``: (k,2) array-like of
     vertex indices, or None. Raises ``ConformalError`` naming the bad seams."""

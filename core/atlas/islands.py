@@ -37,7 +37,8 @@ from ..mesh.repair import repair, repair_merged, zero_area_note
 from ..disk.flatten import QC_WARN, SCALE_REMEDY, scale_variation
 from .charts import split_overlaps
 from .repeats import Repeats
-from .cut import Cut, _seam_halfedges, boundary_crossings, cut_along_seams, seam_pairs, shelf_pack  # noqa: F401
+from .cut import (Cut, _seam_halfedges, boundary_crossings, cut_along_seams, seam_edge_counts,  # noqa: F401
+                  seam_pairs, shelf_pack)
 from ..mesh.validate import (DEFAULT_MAX_FACES, check_arrays, degenerate_faces, loose_edge_count,
                              normalise_scale)
 
@@ -180,25 +181,6 @@ class IslandsResult:
     def corner_uv(self):
         """(m,3,2) UV of every corner of every input triangle."""
         return self.uv[self.F]
-
-
-def _seam_edges_per_island(F, seams, island_faces):
-    """(islands,) int: how many of the edges ``seams`` (k,2) of the triangles ``F`` (m,3) lie in each
-    island (``island_faces``: list of the triangles of each)."""
-    count = np.zeros(len(island_faces), np.int64)
-    if not len(seams):
-        return count
-    n = int(F.max()) + 1
-    island = np.zeros(len(F), np.int64)
-    for i, faces in enumerate(island_faces):
-        island[faces] = i
-    H = np.sort(topology.halfedges(F), axis=1)
-    S = np.sort(seams, axis=1)
-    on = np.isin(H[:, 0] * n + H[:, 1], S[:, 0] * n + S[:, 1])
-    # an edge counts once per island (its two half-edges are in the same island when it opened nothing)
-    pairs = np.unique(np.c_[island[np.flatnonzero(on) // 3], H[on]], axis=0)
-    np.add.at(count, pairs[:, 0], 1)
-    return count
 
 
 def _describe(i, n_isl, faces, tri_poly):
@@ -681,7 +663,7 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
     cut = cut_along_seams(R.F, n2, seams2, strict=False)
     island_faces = cut.island_faces()
     n_cut = cut.n_islands
-    seam_count = _seam_edges_per_island(R.F, seams2, island_faces)
+    seam_count = seam_edge_counts(R.F, seams2, n2, n_cut, cut.face_island)
     weights = np.cumsum([0] + [len(f) for f in island_faces]) / max(1, len(R.F))
     tri_of = R.face_map                                  # input face of each repaired face
     pieces = []                                          # (faces of R.F, Fp, vert_of (input), uv, rep)

@@ -1225,16 +1225,8 @@ def closed_parts(F, count, face_island):
 def _seamed_parts(F, seams, n, count, face_island):
     """(count,) bool: the connected parts (``face_island`` (m,) of the triangles ``F`` (m,3) on ``n``
     vertices) that hold an edge of ``seams`` ((k,2) vertex pairs or None; checked by ``seam_pairs``)."""
-    from ..atlas.cut import seam_pairs
-    from ..mesh.topology import halfedges
-    out = np.zeros(count, bool)
-    S = np.sort(seam_pairs(seams, n), axis=1)
-    if not len(S):
-        return out
-    H = np.sort(halfedges(F), axis=1)
-    hit = np.isin(H[:, 0] * n + H[:, 1], S[:, 0] * n + S[:, 1])
-    out[np.unique(face_island[np.flatnonzero(hit) // 3])] = True
-    return out
+    from ..atlas.cut import seam_edge_counts
+    return seam_edge_counts(F, seams, n, count, face_island) > 0
 
 
 def _pinched(F, n):
