@@ -521,6 +521,24 @@ def test_addon_files_small_and_free_of_math_and_topology():
                         assert sub.attr not in forbidden_np, (f, node.name, sub.attr)
 
 
+def test_auto_seams_unfold_the_default_cube_into_a_net(addon, bl):
+    """The default cube with seams='AUTO' (an error before: its triangulation's first two cones
+    covered it): its eight corners are the cones and the UVs are a net, every face a square of the
+    same size, with no warning."""
+    bpy.ops.mesh.primitive_cube_add()
+    me = bpy.context.object.data
+    assert bpy.ops.uv.conformal_flatten(seams='AUTO', cones=0) == {'FINISHED'}
+    report = json.loads(me['conformal_flatten_report'])
+    assert report['cones'] == 8 and report['flips'] == 0 and not report.get('warnings')
+    uv = np.zeros(2 * len(me.loops), np.float32)
+    me.uv_layers.active.uv.foreach_get('vector', uv)
+    uv = uv.reshape(-1, 2).astype(np.float64)
+    sides = np.array([np.linalg.norm(uv[p.loop_start + (k + 1) % 4] - uv[p.loop_start + k])
+                      for p in me.polygons for k in range(4)])
+    assert sides.max() < sides.min() * (1 + 1e-4)
+    assert uv.min() >= -1e-6 and uv.max() <= 1 + 1e-6
+
+
 def test_auto_seams_unwrap_a_closed_mesh(addon, bl):
     """seams='AUTO' unwraps a closed mesh in one click: the chosen seams are marked on the mesh, the
     cones baked, every corner gets a UV in [0,1] with no flipped triangle; re-running with

@@ -103,6 +103,105 @@ def test_cube_finds_its_eight_corners_exactly():
     assert rep['warnings'] == []
 
 
+def prism(profile, h):
+    """A closed prism over the counter-clockwise polygon ``profile`` (k,2), height ``h``: one quad
+    (two triangles) per side, each cap a fan from its first vertex (long thin triangles, as CAD
+    exports make them)."""
+    P = np.asarray(profile, float)
+    k = len(P)
+    V = np.r_[np.c_[P, np.zeros(k)], np.c_[P, np.full(k, h)]]
+    i = np.arange(k)
+    j = (i + 1) % k
+    fan = np.arange(1, k - 1)
+    F = np.r_[np.c_[i, j, j + k], np.c_[i, j + k, i + k],
+              np.c_[np.zeros(k - 2, int), fan + 1, fan], np.c_[np.full(k - 2, k), fan + k, fan + k + 1]]
+    return V, F.astype(np.int64)
+
+
+def plate_with_hole():
+    """A square plate with a square hole through it (genus 1), 32 triangles."""
+    outer = [[0, 0], [4, 0], [4, 4], [0, 4]]
+    inner = [[1.5, 1.5], [2.5, 1.5], [2.5, 2.5], [1.5, 2.5]]
+    V = np.array([[x, y, z] for z in (0.0, 0.3) for x, y in outer + inner])
+    F = []
+    for i in range(4):
+        a, b = i, (i + 1) % 4
+        ring = [[a, b, 4 + b], [a, 4 + b, 4 + a]]                 # the frame between the squares
+        F += [t[::-1] for t in ring] + [[8 + x for x in t] for t in ring]
+        F += [[a, b, 8 + b], [a, 8 + b, 8 + a]]                   # outer wall
+        F += [[4 + a, 12 + b, 4 + b], [4 + a, 12 + a, 12 + b]]    # wall of the hole
+    return V, np.array(F, np.int64)
+
+
+def test_coarse_polyhedra_unfold_into_isometric_nets():
+    """A polyhedral part (curvature only at its corners) unfolds exactly with its corners as cones
+    and their angle defects as curvatures. Before, the 12-triangle cube (the default cube,
+    triangulated) failed: the one-rings of its first two cones covered it, so the placement stopped
+    at two cones of curvature 2 pi and no layout could be built; the plate with a hole failed too
+    and the L-shaped prism came out at a ratio of 0.17."""
+    from core import unwrap
+    from core.mesh.geometry import angle_sums
+    L = [[0, 0], [3, 0], [3, 1], [1, 1], [1, 3], [0, 3]]
+    for V, F in (rounded_cube(1, 0.0)[:2], prism(L, 0.5), plate_with_hole()):
+        assert topology.boundary_loops(F, len(V)) == []
+        res = cone_unwrap(V, F)
+        rep = res.report
+        Omega = 2 * np.pi - angle_sums(V, F)
+        corners = np.nonzero(np.abs(Omega) > 1e-3)[0]
+        assert sorted(res.cones.tolist()) == corners.tolist()
+        assert np.allclose(res.kappa, Omega[res.cones], atol=1e-9)
+        assert abs(res.kappa.sum() - 2 * np.pi * topology.euler_characteristic(F)) < 1e-9
+        assert rep['flips'] == 0 and rep['overlaps'] == 0 and rep['warnings'] == []
+        assert rep['mu_ratio_p1_p99'] > 1 - 1e-9 and rep['qc_mean'] < 1 + 1e-9
+        # a net: every triangle keeps its 3D side lengths
+        e3 = np.linalg.norm(V[F] - V[np.roll(F, -1, axis=1)], axis=2)
+        euv = np.linalg.norm(res.uv - np.roll(res.uv, -1, axis=1), axis=2)
+        assert np.allclose(euv, e3, rtol=1e-9, atol=1e-12)
+        # the same net after a rotation and a change of scale
+        c, s = np.cos(0.7), np.sin(0.7)
+        R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+        moved = cone_unwrap(3.5 * V @ R.T + [1, -2, 5], F)
+        assert sorted(moved.cones.tolist()) == corners.tolist()
+        assert moved.report['mu_ratio_p1_p99'] > 1 - 1e-9
+    # through unwrap, as the add-on calls it on the default cube
+    V, F = rounded_cube(1, 0.0)[:2]
+    r = unwrap(V, F, cones='auto')
+    assert r.report['mu_ratio_worst'] > 1 - 1e-9 and not r.report['warnings']
+
+
+def test_a_cone_budget_with_no_layout_is_lowered_with_a_warning(monkeypatch):
+    """A budget whose cones give no layout is lowered (halved above 8, then one at a time) until one
+    does, and the result says so; with no layout at any budget the first error is raised. The plate
+    with a hole at a budget of 4: its four cones gave no layout, it raised before."""
+    import core.atlas.cones as cones_mod
+    from core import unwrap
+    V, F = plate_with_hole()
+    r = unwrap(V, F, cones=4)
+    assert 1 <= r.report['cones'] <= 4 and r.islands[0]['flips'] == 0
+    real, asked = cones_mod.cone_unwrap, []
+
+    def failing(V, F, **kw):
+        asked.append(kw['max_cones'])
+        if kw['max_cones'] > 5:
+            raise ConformalError(f"no layout with {kw['max_cones']}", 'solve_failed')
+        return real(V, F, **kw)
+    monkeypatch.setattr(cones_mod, 'cone_unwrap', failing)
+    r = unwrap(V, F, cones=40)
+    assert asked == [40, 20, 10, 5]
+    assert r.report['cones'] <= 5
+    assert any('no layout could be built with a budget of 40 cones (no layout with 40)' in w
+               for w in r.islands[0]['warnings'])
+
+    def never(V, F, **kw):
+        asked.append(kw['max_cones'])
+        raise ConformalError(f"no layout with {kw['max_cones']}", 'solve_failed')
+    monkeypatch.setattr(cones_mod, 'cone_unwrap', never)
+    del asked[:]
+    with pytest.raises(ConformalError, match='no layout with 12'):
+        unwrap(V, F, cones=12)
+    assert asked == [12, 6, 5, 4, 3, 2, 1]
+
+
 def test_rounded_cube_gauss_bonnet_and_quality():
     V, F, corners = rounded_cube(8, 0.3)
     res = cone_unwrap(V, F, target_ratio=0.8)

@@ -105,6 +105,8 @@ TOP_UPS = 2                        # automatic mode: re-placements with a raised
 TOP_UP_MARGIN = 0.02               # layout misses the target (``cone_unwrap``)
 ALT_MARGIN = 0.02                  # another placement is laid out when its estimate beats the realised
                                    # ratio of the best clean layout by this much
+POLYHEDRAL_DEFECT = 1e-3           # an interior vertex with a larger angle defect (rad) is a corner
+                                   # of a polyhedral mesh (``polyhedral_cones``)
 SKIP_MARGIN = 0.02                 # an angle candidate whose estimate is this far below the realised
                                    # ratio of the best clean layout is not laid out (realised ratios
                                    # stayed within +0.012 of their estimates on every corpus row)
@@ -581,6 +583,11 @@ def _greedy(system, target_ratio, max_cones, candidates, report):
         ok = system.eligible.copy()
         if S:
             ok &= ~system.rings(S, 1)
+            if not ok.any():
+                # a coarse mesh whose cones' one-rings cover it (a 12-triangle cube: two opposite
+                # corners) may still need more cones: then a neighbour of a cone may be one too
+                ok = system.eligible.copy()
+                ok[S] = False
         idx = np.nonzero(ok)[0]
         if not len(idx):
             break
@@ -1890,10 +1897,11 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
                              "to 4*pi)")
     given = isinstance(cones, tuple) and len(cones) == 2
 
-    def lay_out(S, kappa, bar=0.0, quick=False):
+    def lay_out(S, kappa, bar=0.0, quick=False, only=False):
         """Cut the mesh through the cones ``S`` and lay out the angle candidates on that cut
         (the placement's ``kappa`` first; ``quick``: then only its exact-metric correction and its
-        softened sets); ``bar``: the ratio of a clean layout of other cones in hand (a candidate
+        softened sets; ``only``: ``kappa`` alone, beyond ``MAX_LAYOUTS`` if that is spent);
+        ``bar``: the ratio of a clean layout of other cones in hand (a candidate
         estimated ``SKIP_MARGIN`` below it, or below this cut's best clean one, is skipped).
         Returns (best (key, label, kappa, evaluation) or None, list of what was tried, the best
         layout with defects as [ratio, evaluation] or [])."""
@@ -1973,7 +1981,9 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         first = [('given' if given else 'placement', kappa)]
         # a big mesh keeps its first clean layout: the placement's angles, softened where they flip,
         # before the other sets (a small mesh lays out every set and keeps the best)
-        if quick:
+        if only:
+            sets = (first,)
+        elif quick:
             sets = (first, corrected(), softened())
         elif n > BIG_MESH:
             sets = (first, softened(), candidates())
@@ -1983,7 +1993,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         for label, kap in itertools.chain(*sets):
             if big_done():
                 break                                   # big mesh: the first valid layout is kept
-            if budget[0] >= MAX_LAYOUTS:
+            if budget[0] >= MAX_LAYOUTS and not only:
                 tried.append({'angles': label, 'skipped': True, 'budget': True})
                 break
             if any(np.array_equal(kap, k0) for k0 in seen):
@@ -2076,6 +2086,16 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
             tried += [dict(c, angles=f"{c['angles']} (a cone next to flips moved)") for c in tried2]
             if best2 is not None and best2[0] > best[0]:
                 best, S = best2, S2
+    iso = polyhedral_cones(system, int(max_cones)) if cones is None and n <= BIG_MESH else None
+    if iso is not None and not (best is not None and best[0][0] and best[3]['measured']['qc_mean'] <= QC_WARN
+                                and (target_ratio is None or best[0][2] >= target_ratio)):
+        # a polyhedral mesh (a CAD part, a box) whose best layout folds, misses the target or is far
+        # from conformal: its corners as cones with their own angle defects unfold it isometrically
+        # (u = 0: a net of the part), kept if that layout is better
+        best2, tried2, _ = lay_out(*iso, clean_ratio(best), only=True)
+        tried += [dict(c, angles=f"{c['angles']} ({len(iso[0])} corners: the isometric net)") for c in tried2]
+        if best2 is not None and (best is None or best2[0] > best[0]):
+            best, S = best2, iso[0]
     timings['layout'] = time.perf_counter() - t_lay - timings['cut']
     if best is None:
         raise ConformalError(f"no layout of the cut disk could be built: {tried[0]['error']}",
@@ -2136,6 +2156,21 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
     u_in[orig] = u                                          # (a split vertex: its last copy)
     report_progress(1.0, 'done')
     return ConeResult(uv=uv, seams=seams_in, cones=orig[S], kappa=kappa, u=u_in, report=rep)
+
+
+def polyhedral_cones(system, max_cones, tol=POLYHEDRAL_DEFECT):
+    """The corners of a polyhedral mesh as cones: (S (c,) int, kappa (c,) rad) with ``S`` the
+    interior vertices whose angle defect exceeds ``tol`` in size and ``kappa`` their defects, or None
+    if there are none or more than ``max_cones``. With these cones the log scale is ``u = 0``
+    (closed: the defects left out, each below ``tol``, are spread over the cones so that the sum is
+    ``2 pi chi``): the cut surface unfolds isometrically."""
+    S = np.nonzero(system.eligible & (np.abs(system.Omega) > tol))[0]
+    if not 0 < len(S) <= max_cones:
+        return None
+    kappa = system.Omega[S].copy()
+    if system.needs_sum:
+        kappa += (system.total - kappa.sum()) / len(S)
+    return S.astype(np.int64), kappa
 
 
 def clean_ratio(best):

@@ -458,15 +458,31 @@ def true_scale(parts: Sequence[tuple]) -> list:
 def _cone_part(V, F, cones, target_ratio, max_cones, progress):
     """One connected part through ``cone_unwrap``: the automatic budget (``cones`` 'auto') keeps the
     best defect-free layout among ``max_cones`` and smaller budgets, since a layout that folds or
-    overlaps is worth less than one with fewer cones. Returns ``ConeResult``."""
+    overlaps is worth less than one with fewer cones. A budget whose cones give no layout at all (a
+    coarse part: 'solve_failed') is lowered until one does (halved above 8, then one at a time), with
+    a warning; the first error is raised if none does. Returns ``ConeResult``."""
     from .cones import cone_unwrap, realised_spread
-    if cones != 'auto':
-        return cone_unwrap(V, F, cones=None, target_ratio=None, max_cones=int(cones), progress=progress)
-    best = None
-    budget = int(max_cones)
+    auto = cones == 'auto'
+    budget = int(max_cones) if auto else int(cones)
+    best, failed = None, None
     while True:
-        res = cone_unwrap(V, F, cones=None, target_ratio=target_ratio, max_cones=budget, progress=progress)
+        try:
+            res = cone_unwrap(V, F, cones=None, target_ratio=target_ratio if auto else None, max_cones=budget,
+                              progress=progress)
+        except ConformalError as exc:
+            if exc.code != 'solve_failed' or budget <= 1:
+                if best is not None:
+                    return best[1]
+                raise (failed[1] if failed else exc) from None
+            failed = failed or (budget, exc)
+            budget = budget - 1 if budget <= 8 else budget // 2
+            continue
         r = res.report
+        if failed:
+            r['warnings'].append(f"no layout could be built with a budget of {failed[0]} cones "
+                                 f"({failed[1].problem}): {r['cones']} cones were placed")
+        if not auto:
+            return res
         defects = r['flips'] + r['overlaps'] + r.get('degenerate', 0)
         key = (defects == 0, -defects, realised_spread(r))
         if best is None or key > best[0]:
