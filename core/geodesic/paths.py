@@ -1,7 +1,9 @@
 """Shortest paths on a triangle mesh's surface through Steiner points on its edges (docs/geodesic.md,
 "Refined seed" and "Sphere mode"): the graph joins every pair of points on the boundary of each
-triangle by the straight segment inside it, so every graph path is a path on the surface (an upper
-bound of the geodesic distance, exact as the points per edge ``k`` grow), and Richardson's
+triangle by the straight segment inside it (and across a flat convex patch of several triangles,
+such as an n-gon cut into a fan, every pair of points on the patch's boundary: ``planar_patches``),
+so every graph path is a path on the surface (an upper bound of the geodesic distance, exact as the
+points per edge ``k`` grow), and Richardson's
 extrapolation from ``k`` and ``(k - 1) / 2`` points per edge removes most of the excess.
 
 ``steiner_distances``: the paths from source vertices or a point, on any set of triangles (the
@@ -18,6 +20,10 @@ GRADE_ANGLE = np.radians(10.0)  # ``edge_grading``: an edge at a corner narrower
 GRADE_MAX = 8        # at most this many times the points
 GRADE_EXTRA = 0.25   # the graded points may always add this fraction to the graph's links (its k^2 terms),
 GRADE_EXTRA_MAX = 15.0  # and up to this much where ``PATH_BUDGET`` has room (a small mesh of slivers)
+PATCH_LINKS = 2_000_000  # links across flat convex patches (``patch_links``) a graph may add
+PATCH_MIN = 3         # ... of at least this many triangles (an n-gon's fan; not a quad's two)
+PATCH_MAX = 1000      # ... the largest this many patches at most
+PATCH_NORMAL = 1e-10  # two triangles are coplanar when their unit normals' dot product is within this of 1
 SHORT_AREA = 0.01    # ``thin_warning``: thin triangles left short of their graded points over this area
 SHORT_FACES = 8      # fraction, and at least this many of them, are warned about
 
@@ -139,7 +145,7 @@ class SteinerGraph:
 
     SPARE = 256   # link slots of the virtual source (a point in a triangle needs 3 + 3k of them)
 
-    def __init__(self, V, F, k=STEINER, grade=None, edges=None, lengths=None):
+    def __init__(self, V, F, k=STEINER, grade=None, edges=None, lengths=None, patches=None):
         V = np.asarray(V, np.float64)
         F = np.asarray(F, np.int64)
         n = len(V)
@@ -188,6 +194,16 @@ class SteinerGraph:
                 W.append(np.linalg.norm(Q[:, ia[cross]] - Q[:, ib[cross]], axis=2).ravel())
             if grade is None:
                 self.own = own                                               # (m, 3 + 3k), in F's order
+        self.patches = []
+        if lengths is None:
+            # a flat convex patch of several triangles (a CAD face, an n-gon's fan): straight links
+            # between the points on its boundary, across the triangles inside it
+            given = patches is not None
+            links, self.patches = patch_links(patches if given else planar_patches(V, F, ue, inv), ue, n,
+                                              count, start, None if given else PATCH_LINKS)
+            for a, b in links:
+                A.append(a)
+                B.append(b)
         for c in np.unique(count):
             es = np.flatnonzero(count == c)
             chain = np.concatenate([ue[es, :1], start[es][:, None] + np.arange(c)[None], ue[es, 1:]], 1)
@@ -273,6 +289,113 @@ class SteinerGraph:
             G = sp.csr_matrix((np.r_[G.data[:lo], wx], np.r_[G.indices[:lo], cand],
                                np.r_[G.indptr[:N + 1], lo + len(cand)]), shape=G.shape)
         return dijkstra(G, directed=True, indices=N)[rank]
+
+
+def planar_patches(V, F, ue, inv, min_size=PATCH_MIN, max_patches=PATCH_MAX):
+    """The flat convex patches of a mesh, for ``SteinerGraph``'s ``patch_links``. A patch is a connected
+    set of at least ``min_size`` coplanar triangles of ``F`` (m,3) (vertices ``V`` (n,3); unit normals
+    within ``PATCH_NORMAL``, either orientation) that is a disk whose boundary angles are all at most
+    pi: a convex polygon, so the straight segment between any two points on its boundary lies on the
+    surface. A patch is left out where a triangle outside it joins two of its boundary edges (a fold
+    back onto it). ``ue`` (e,2), ``inv`` (m,3): ``mesh_edges``. Returns a list, the largest first and
+    at most ``max_patches``, of (bnd (b,) its boundary edges, bv (c,) its boundary vertices, opp (b,)
+    the corner of its triangle on each boundary edge off that edge, tin (b,) that triangle)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from ..mesh.geometry import corner_angles, face_normals_unnormalised
+    m = len(F)
+    N = face_normals_unnormalised(V, F)
+    ln = np.linalg.norm(N, axis=1)
+    ok = ln > 1e-300
+    N = N / np.where(ok, ln, 1.0)[:, None]
+    # the (at most two) triangles of each edge
+    fe = inv.ravel()
+    ft = np.repeat(np.arange(m), 3)
+    order = np.argsort(fe, kind='stable')
+    fe, ft = fe[order], ft[order]
+    two = np.r_[False, fe[1:] == fe[:-1]]                  # the second triangle of an edge
+    t1, t2 = ft[np.flatnonzero(two) - 1], ft[two]
+    flat = ok[t1] & ok[t2] & (np.abs((N[t1] * N[t2]).sum(1)) > 1.0 - PATCH_NORMAL)
+    if not flat.any():
+        return []
+    _, comp = connected_components(coo_matrix((np.ones(int(flat.sum())), (t1[flat], t2[flat])), shape=(m, m)),
+                                   directed=False)
+    size = np.bincount(comp)
+    big = np.flatnonzero(size >= min_size)
+    big = big[np.argsort(-size[big], kind='stable')][:max_patches]
+    if not len(big):
+        return []
+    rank = np.full(len(size), -1)
+    rank[big] = np.arange(len(big))
+    sel = np.flatnonzero(rank[comp] >= 0)
+    sel = sel[np.argsort(rank[comp[sel]], kind='stable')]
+    out = []
+    for tris in np.split(sel, np.cumsum(size[big])[:-1]):
+        es, side_count = np.unique(inv[tris].ravel(), return_counts=True)
+        bnd = es[side_count == 1]                            # boundary edges of the patch
+        verts, local = np.unique(F[tris], return_inverse=True)
+        if len(verts) - len(es) + len(tris) != 1:            # not a disk
+            continue
+        s = np.bincount(local.ravel(), corner_angles(V, F[tris]).ravel(), minlength=len(verts))
+        bv = np.unique(ue[bnd])
+        if (s[np.searchsorted(verts, bv)] > np.pi + 1e-9).any():    # not convex
+            continue
+        # the patch's triangle on each boundary edge, and the triangle across it (or -1)
+        pos = np.searchsorted(fe, bnd)
+        nxt = np.minimum(pos + 1, len(fe) - 1)
+        tA, tB = ft[pos], np.where((pos + 1 < len(fe)) & (fe[nxt] == bnd), ft[nxt], -1)
+        inside = np.isin(tA, tris)
+        tin, tout = np.where(inside, tA, tB), np.where(inside, tB, tA)
+        ends = ue[bnd]
+        off = ~(F[tin][:, :, None] == ends[:, None, :]).any(2)             # the corner off each edge
+        across = tout >= 0
+        off_out = ~(F[tout[across]][:, :, None] == ends[across][:, None, :]).any(2)
+        if (off.sum(1) != 1).any() or (off_out.sum(1) != 1).any():
+            continue
+        if np.isin(F[tout[across]][off_out], bv).any():     # a triangle outside joins two of its edges
+            continue
+        out.append((bnd, bv, F[tin][off], tin))
+    return out
+
+
+def patch_links(patches, ue, n, count, start, budget=PATCH_LINKS):
+    """Links across the ``patches`` (``planar_patches``) for ``SteinerGraph``: every pair of graph points
+    on a patch's boundary (its boundary vertices, and the ``count`` (e,) points of each boundary edge
+    from ``start`` (e,)) by the straight segment, but for the pairs the triangle links and the edge
+    chains already join (the graph sums repeated links): on one edge, in one triangle, or the two ends
+    of a mesh edge (``ue`` (e,2), ``n`` vertices). Patches are taken in order, each if its links fit in
+    what is left of ``budget`` (None: every one). Returns (list of (a (l,), b (l,)) point index pairs,
+    the patches taken). Without them an n-gon cut into a fan of needles is crossed through the Steiner
+    points of every needle: the Blender cone's 0.50 % mean error, falling as 1/k."""
+    links, taken, used = [], [], 0
+    edge_key = ue[:, 0] * n + ue[:, 1]
+    for patch in patches:
+        bnd, bv, opp, tin = patch
+        cnt = count[bnd]
+        pe = np.repeat(np.arange(len(bnd)), cnt)
+        pts = np.r_[bv, start[bnd][pe] + np.arange(len(pe)) - np.repeat(np.cumsum(cnt) - cnt, cnt)]
+        edge_of = np.r_[np.full(len(bv), -1), pe]            # boundary vertices: -1
+        npt = len(pts)
+        if budget is not None and npt * (npt - 1) // 2 + used > budget:
+            continue
+        i, j = np.triu_indices(npt, 1)
+        keep = np.ones(len(i), bool)
+        ei, ej = edge_of[i], edge_of[j]
+        both = (ei >= 0) & (ej >= 0)
+        keep[both] = (ei[both] != ej[both]) & (tin[ei[both]] != tin[ej[both]])
+        # a vertex and the points of an edge: not of its own edges, nor of the edge it is opposite
+        ends = ue[bnd]
+        for vi, ex in ((i, ej), (j, ei)):
+            vx = np.flatnonzero((edge_of[vi] < 0) & (ex >= 0))
+            u, e = pts[vi[vx]], ex[vx]
+            keep[vx[(ends[e] == u[:, None]).any(1) | (opp[e] == u)]] = False
+        vv = np.flatnonzero((ei < 0) & (ej < 0))
+        a, b = pts[i[vv]], pts[j[vv]]
+        keep[vv[np.isin(np.minimum(a, b) * n + np.maximum(a, b), edge_key)]] = False
+        links.append((pts[i[keep]], pts[j[keep]]))
+        taken.append(patch)
+        used += int(keep.sum())
+    return links, taken
 
 
 def _link_matrix(A, B, W, pts, rank, N, spare):
@@ -361,7 +484,10 @@ class SurfacePaths:
                 A = _areas(V, F, lengths)
                 self.short = (float(A[short].sum() / max(A.sum(), 1e-300)), int(short.sum()))
         self.fine = fine = SteinerGraph(V, F, k, grade, edges, lengths)
-        self.coarse = coarse = SteinerGraph(V, F, (k - 1) // 2, grade, edges, lengths)
+        # the coarse graph links across the same flat patches as the fine one (Richardson's pair must
+        # differ only in its points: with the budget choosing for each, the coarse graph took more
+        # patches and came out shorter than the fine one)
+        self.coarse = coarse = SteinerGraph(V, F, (k - 1) // 2, grade, edges, lengths, patches=fine.patches)
         n = fine.n
         fine_at = np.full(coarse.N, -1, np.int64)
         fine_at[:n] = np.arange(n)
