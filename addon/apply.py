@@ -198,7 +198,7 @@ def finish(job, res, uv_name: str, packer: str, pack_note: str | None, colormap:
         'triangles': int(len(res.tris)), 'selection': job.selection,
         'flattened_polygons': int(polys.sum()),
         'islands': core['islands'], 'islands_failed': core['failed'],
-        'seams': core['seams'], 'holes': opts.holes, 'seam_mode': opts.seams,
+        'seams': core['seams'], 'holes': opts.core_holes, 'seam_mode': opts.seams,
         'repairs': core.get('repairs', []),
         'cones': len(res.result.cones) if auto else None,
         'seam_fraction': core.get('seam_fraction') if auto else None,

@@ -31,8 +31,7 @@ class FlattenOptions:
     boundary: str = 'UNIFORM'
     fit: str = 'UNIT_SQUARE'
     bake: bool = True
-    fill_holes: bool = True
-    cut_holes: bool = False
+    holes: str = 'AUTO'          # 'AUTO', 'FILL', 'CUT' or 'ERROR' (the operator's enum)
     keep_relative_scale: bool = True
     skip_bad_islands: bool = False
     packer: str = 'BLENDER'
@@ -54,9 +53,9 @@ class FlattenOptions:
         return 'auto' if self.cones == 0 else int(self.cones)
 
     @property
-    def holes(self) -> str:
-        """The core's hole mode: 'fill', 'cut' or 'error'."""
-        return 'fill' if self.fill_holes else ('cut' if self.cut_holes else 'error')
+    def core_holes(self) -> str:
+        """The core's hole mode: 'auto', 'fill', 'cut' or 'error'."""
+        return self.holes.lower()
 
 
 class Cancelled(Exception):
@@ -139,7 +138,7 @@ def compute_job(job: MeshJob, opts: FlattenOptions, progress=None,
     step(0.0, 'preparing')
     md = job.md
     res = unwrap(md.V, md.F, seams=job.seams, faces=job.faces, tri_poly=md.tri_poly,
-                 boundary=opts.boundary.lower(), holes=opts.holes, fit=opts.fit.lower(),
+                 boundary=opts.boundary.lower(), holes=opts.core_holes, fit=opts.fit.lower(),
                  island_scale='true' if opts.keep_relative_scale else 'normalise', pack=True, margin=0.01,
                  on_error='skip' if opts.skip_bad_islands else 'raise', max_faces=opts.max_faces,
                  edges=job.edges, progress=step, cones=opts.core_cones, target_ratio=opts.target_ratio)

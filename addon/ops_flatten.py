@@ -55,6 +55,14 @@ SEAM_ITEMS = [
     ('AUTO', "Automatic", "Choose seams through cone singularities for the most uniform scale, on any "
                           "mesh (closed ones too), and mark them as the mesh's seams"),
 ]
+HOLES_ITEMS = [
+    ('AUTO', "Automatic", "An island with holes is flattened both ways, its holes filled virtually and "
+                          "cut open, and the better map is kept"),
+    ('FILL', "Fill", "Fill the holes of an island virtually for the computation (a temporary cap, "
+                     "removed afterwards); the longest boundary loop stays the outer boundary"),
+    ('CUT', "Cut", "Cut every hole open to the outer boundary along a shortest edge path"),
+    ('ERROR', "Refuse", "Stop with an error on an island with holes"),
+]
 PACKER_ITEMS = [
     ('BLENDER', "Pack Islands", "Blender's Pack Islands (exact shapes, rotation); the core's shelf "
                                 "packing if it fails"),
@@ -168,13 +176,8 @@ class UV_OT_conformal_flatten(bpy.types.Operator):
     target_ratio: FloatProperty(name="Target Ratio", default=0.5, min=0.01, max=1.0, precision=2,
                                 description="With automatic seams and Cones 0: the ratio of the 1st to "
                                             "the 99th percentile of the scale to reach")
-    fill_holes: BoolProperty(name="Fill Holes", default=True,
-                             description="Fill the holes of an island virtually for the computation (a "
-                                         "temporary cap, removed afterwards); the longest boundary "
-                                         "loop stays the outer boundary")
-    cut_holes: BoolProperty(name="Cut Holes", default=False,
-                            description="When Fill Holes is off: cut every hole open to the outer "
-                                        "boundary along a shortest edge path (instead of an error)")
+    holes: EnumProperty(name="Holes", items=HOLES_ITEMS, default='AUTO',
+                        description="What to do with an island that has holes (several boundary loops)")
     keep_relative_scale: BoolProperty(name="Keep Relative Scale", default=True,
                                       description="All islands keep their true size relative to each "
                                                   "other: one texel density everywhere. Off: every "
@@ -216,10 +219,7 @@ class UV_OT_conformal_flatten(bpy.types.Operator):
         sub.prop(self, 'cones')
         sub.prop(self, 'target_ratio')
         col = layout.column(heading="Islands")
-        col.prop(self, 'fill_holes')
-        sub = col.row()
-        sub.active = not self.fill_holes
-        sub.prop(self, 'cut_holes')
+        col.prop(self, 'holes')
         col.prop(self, 'keep_relative_scale')
         col.prop(self, 'skip_bad_islands')
         col = layout.column(heading="Packing")
@@ -233,7 +233,7 @@ class UV_OT_conformal_flatten(bpy.types.Operator):
 
     def flatten_options(self, context):
         return FlattenOptions(boundary=self.boundary, fit=self.fit, bake=self.bake,
-                              fill_holes=self.fill_holes, cut_holes=self.cut_holes,
+                              holes=self.holes,
                               keep_relative_scale=self.keep_relative_scale,
                               skip_bad_islands=self.skip_bad_islands, packer=self.packer,
                               pack_shape=self.pack_shape, pack_rotate=self.pack_rotate,

@@ -11,7 +11,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, Po
 
 from . import meshio
 from .apply import REPORT_KEY
-from .ops_flatten import BOUNDARY_ITEMS, FIT_ITEMS, SEAM_ITEMS, UV_OT_conformal_flatten
+from .ops_flatten import BOUNDARY_ITEMS, FIT_ITEMS, HOLES_ITEMS, SEAM_ITEMS, UV_OT_conformal_flatten
 from .sidebar import (CATEGORY, PARENT_IDS, add_section, draw_report, fmt as _fmt,
                       remove_section, sections)
 
@@ -42,6 +42,7 @@ class ConformalFlattenSettings(bpy.types.PropertyGroup):
     cones: IntProperty(name="Cones", default=0, min=0, max=256,
                        description="Cones per part with automatic seams (0: as few as reach the target)")
     target_ratio: FloatProperty(name="Target Ratio", default=0.5, min=0.01, max=1.0, precision=2)
+    holes: EnumProperty(name="Holes", items=HOLES_ITEMS, default='AUTO')
 
 
 class _ConformalPanel:
@@ -61,9 +62,11 @@ class _ConformalPanel:
         sub.active = settings.seams == 'AUTO'
         sub.prop(settings, 'cones')
         sub.prop(settings, 'target_ratio')
+        col.prop(settings, 'holes')
         op = col.operator(UV_OT_conformal_flatten.bl_idname, icon='UV')
         op.boundary, op.fit, op.bake = settings.boundary, settings.fit, settings.bake
         op.seams, op.cones, op.target_ratio = settings.seams, settings.cones, settings.target_ratio
+        op.holes = settings.holes
 
         obj = context.active_object
         report = meshio.load_report(obj.data, REPORT_KEY) if obj is not None and obj.type == 'MESH' else None

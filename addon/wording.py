@@ -7,7 +7,7 @@ is ``f"{problem}: {remedy wording}"``; no message text is ever edited."""
 from ..core.errors import REMEDIES
 
 BLENDER_REMEDIES = {
-    'fill_holes': "enable Fill Holes (or Cut Holes), or mark a seam from each hole to the outer boundary "
+    'fill_holes': "set Holes to Automatic, Fill or Cut, or mark a seam from each hole to the outer boundary "
                   "(Edge > Mark Seam)",
     'mark_seams': "set Seams to Automatic (Conformal sidebar: seams through cones), mark seams that cut "
                   "it open (Edge > Mark Seam), for example a loop around it and a seam across each half, or "

@@ -334,8 +334,8 @@ def test_two_boundary_loops_fail_unchanged(addon, bl):
     obj.data.attributes.new('conformal_factor', 'FLOAT', 'POINT').data.foreach_set(
         'value', np.linspace(0, 1, len(V), dtype=np.float32))
     obj.data['conformal_factor_range'] = [0.0, 1.0]
-    # holes are filled by default (issue 7); without filling, two loops are an error
-    _fails_unchanged(bl, '2 boundary loops', fill_holes=False)
+    # holes are handled by default (issue 7); with Holes set to Refuse, two loops are an error
+    _fails_unchanged(bl, '2 boundary loops', holes='ERROR')
 
 
 def test_non_mesh_object_fails_unchanged(addon, bl):

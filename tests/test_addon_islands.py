@@ -210,33 +210,48 @@ def test_suzanne_island_by_island(addon, bl):
     me = obj.data
     before = bl.mesh_snapshot(me)
     with pytest.raises(RuntimeError, match=r"island 3 of 3 \(856 triangles, e\.g\. polygon \d+\) has 2 "
-                                           r"boundary loops.*enable Fill Holes"):
-        bpy.ops.uv.conformal_flatten(boundary='AREA', fill_holes=False)
+                                           r"boundary loops.*set Holes to Automatic, Fill or Cut"):
+        bpy.ops.uv.conformal_flatten(boundary='AREA', holes='ERROR')
     bl.assert_same(before, bl.mesh_snapshot(me))
-    bpy.ops.uv.conformal_flatten(boundary='AREA')
+    bpy.ops.uv.conformal_flatten(boundary='AREA', holes='FILL')
     rep = report_of(me)
     assert rep['islands'] == 3 and rep['holes_filled'] == 1 and rep['flips'] == 0
     # Suzanne is coarse: the eyes (56 triangles each) are far from conformal at this resolution
     check_islands_layout(me, qc_max=1.8)
     n = mark_seams(me, lambda a, b: (np.abs(a[:, 0]) < 1e-5) & (np.abs(b[:, 0]) < 1e-5))
     assert n > 0
-    bpy.ops.uv.conformal_flatten(boundary='UNIFORM', pack_shape='CONCAVE')
+    bpy.ops.uv.conformal_flatten(boundary='UNIFORM', pack_shape='CONCAVE', holes='FILL')
     rep = report_of(me)
     assert rep['islands'] == 4 and rep['holes_filled'] == 2 and rep['flips'] == 0
     assert [r['triangles'] for r in rep['island_reports']] == [56, 56, 428, 428]
     check_islands_layout(me, qc_max=1.5)
 
 
+def test_holes_automatic_cuts_a_tube_open(addon, bl):
+    """Holes default to Automatic: an island with holes is flattened both ways and the better map
+    kept. Blender's cylinder without caps (a tube: two boundary loops) filled gives a map far from
+    conformal (qc_mean 2.26, warned; the default before); cut open it is a rectangle, isometric."""
+    bpy.ops.mesh.primitive_cylinder_add(end_fill_type='NOTHING')
+    me = bpy.context.object.data
+    bpy.ops.uv.conformal_flatten(holes='FILL')
+    filled = report_of(me)
+    assert filled['holes_filled'] == 1 and filled['qc_mean'] > 1.5 and filled['warnings']
+    bpy.ops.uv.conformal_flatten()
+    rep = report_of(me)
+    assert rep['holes_cut'] == 1 and rep['holes_filled'] == 0 and rep['flips'] == 0
+    assert rep['qc_mean'] < 1 + 1e-6 and rep['mu_ratio'] > 1 - 1e-6 and not rep['warnings']
+
+
 def test_cut_holes_and_skip_bad_islands(addon, bl):
     bpy.ops.mesh.primitive_monkey_add()
     me = bpy.context.object.data
-    bpy.ops.uv.conformal_flatten(boundary='AREA', fill_holes=False, cut_holes=True, packer='SHELF')
+    bpy.ops.uv.conformal_flatten(boundary='AREA', holes='CUT', packer='SHELF')
     rep = report_of(me)
     assert rep['holes_cut'] == 1 and rep['holes_filled'] == 0 and rep['flips'] == 0
     # skip: the head keeps its UVs bit for bit, the eyes are flattened, a WARNING says so
     old = np.random.default_rng(1).random((len(me.loops), 2)).astype(np.float32)
     set_loop_uv(me, old)
-    bpy.ops.uv.conformal_flatten(boundary='AREA', fill_holes=False, skip_bad_islands=True)
+    bpy.ops.uv.conformal_flatten(boundary='AREA', holes='ERROR', skip_bad_islands=True)
     rep = report_of(me)
     assert rep['islands'] == 3 and rep['islands_failed'] == 1
     assert 'boundary loops' in rep['island_reports'][2]['error']
@@ -254,7 +269,7 @@ def test_two_holes_filled(addon, bl):
     V, F = two_holes('bump', 33)
     obj = bl.mesh_object('holes', V.astype(np.float32).astype(float), F)
     me = obj.data
-    assert bpy.ops.uv.conformal_flatten(boundary='UNIFORM') == {'FINISHED'}
+    assert bpy.ops.uv.conformal_flatten(boundary='UNIFORM', holes='FILL') == {'FINISHED'}
     rep = report_of(me)
     assert rep['holes_filled'] == 2 and rep['islands'] == 1 and rep['flips'] == 0
     assert rep['triangles'] == len(F)
@@ -271,7 +286,7 @@ def test_two_holes_filled(addon, bl):
     # filling off: an error naming the three loops, data unchanged
     before = bl.mesh_snapshot(me)
     with pytest.raises(RuntimeError, match='3 boundary loops'):
-        bpy.ops.uv.conformal_flatten(boundary='AREA', fill_holes=False)
+        bpy.ops.uv.conformal_flatten(boundary='AREA', holes='ERROR')
     bl.assert_same(before, bl.mesh_snapshot(me))
 
 
@@ -622,8 +637,9 @@ def test_invoke_in_background_runs_execute(addon, bl):
 
 def test_operator_properties(addon):
     props = bpy.ops.uv.conformal_flatten.get_rna_type().properties
-    assert props['fill_holes'].default is True and props['keep_relative_scale'].default is True
-    assert props['cut_holes'].default is False and props['skip_bad_islands'].default is False
+    assert props['holes'].default == 'AUTO' and props['keep_relative_scale'].default is True
+    assert {i.identifier for i in props['holes'].enum_items} == {'AUTO', 'FILL', 'CUT', 'ERROR'}
+    assert props['skip_bad_islands'].default is False
     assert props['packer'].default == 'BLENDER'
     assert {i.identifier for i in props['pack_shape'].enum_items} == {'CONCAVE', 'CONVEX', 'AABB'}
     assert props['pack_shape'].default == 'AABB'          # as Blender's Unwrap packs
@@ -693,7 +709,7 @@ def test_sidebar_islands_section(addon, bl):
     bpy.ops.mesh.primitive_monkey_add()
     ui.draw_islands_section(Layout(), bpy.context)
     assert labels == ["Seams split the mesh into islands"]
-    bpy.ops.uv.conformal_flatten(boundary='AREA', packer='SHELF')
+    bpy.ops.uv.conformal_flatten(boundary='AREA', packer='SHELF', holes='FILL')
     labels.clear()
     ui.draw_islands_section(Layout(), bpy.context)
     assert labels == ["Islands", "3", "Holes", "1 filled", "Faces", "all", "Packing", "shelf",
