@@ -274,11 +274,18 @@ def md_used(md):
 def summary_line(r):
     """One line for the status bar."""
     solver = "scikit-fmm" if r['solver'] == 'skfmm' else "numpy sweeping"
+    reached, paths = r.get('islands_reached'), r.get('paths_islands', 0)
     flat = "reused flattening" if r['flattening'] != 'computed' else f"flattened ({r['boundary'].lower()})"
-    how = "exact (flat mesh, no grid)" if r.get('planar_islands') == r.get('islands_reached') else \
-        f"grid {r['grid'][0]}x{r['grid'][1]} ({solver})"
+    if r.get('planar_islands') == reached:
+        how = "exact (flat mesh, no grid)"
+    elif paths == reached and r.get('steiner_points'):
+        # closed parts (and parts the map cannot resolve) are answered on the surface: no grid
+        how, flat = f"surface paths ({r.get('steiner_points')} points per edge)", None
+    else:
+        how = f"grid {r['grid'][0]}x{r['grid'][1]} ({solver})" + \
+            (f", surface paths on {paths} island(s)" if paths else "")
     return (f"Geodesic distance on {r['object']!r} from {r['source_description']}: max "
-            f"{r['distance_range'][1]:.4g}, {how}, {flat}, "
+            f"{r['distance_range'][1]:.4g}, {how}, " + (f"{flat}, " if flat else "") +
             f"{r['seconds']['total']:.2f} s, estimated mean error {100 * r['error_estimate']:.2g}%")
 
 

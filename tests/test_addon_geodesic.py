@@ -316,3 +316,25 @@ def test_a_flat_mesh_is_measured_exactly_without_a_grid(addon, bl):
     assert np.abs(point_attr(obj.data, 'geodesic_distance') - exact).max() < 1e-5       # float32 storage
     from conformal_flatten.addon.ops_geodesic import GEODESIC_ROWS
     assert dict(GEODESIC_ROWS)["Grid"](rep) == "none: flat, exact"
+
+
+def test_a_closed_mesh_reports_surface_paths_not_a_grid(addon, bl):
+    """A closed mesh is answered by surface paths: the status line names them (it said "grid 0x0
+    (scikit-fmm), flattened (uniform)", for a grid and a flattening that were never made)."""
+    from conformal_flatten.addon.ops_geodesic import summary_line
+    bpy.ops.mesh.primitive_cube_add()
+    obj = bpy.context.object
+    select_vertices(obj, [0])
+    assert bpy.ops.mesh.conformal_geodesic_distance() == {'FINISHED'}
+    bpy.ops.object.mode_set(mode='OBJECT')
+    rep = report_of(obj.data)
+    assert rep['paths_islands'] == rep['islands_reached'] == 1
+    line = summary_line(rep)
+    assert f"surface paths ({rep['steiner_points']} points per edge)" in line
+    assert 'grid' not in line and 'flattened' not in line
+    d = point_attr(obj.data, 'geodesic_distance')
+    V = np.array([v.co for v in obj.data.vertices])
+    # a cube's corners: the straight segment on a face, or across two faces to the far corner
+    far = np.isclose(np.abs(V - V[0]).sum(1), 6.0)
+    exact = np.where(far, np.sqrt(20.0), np.linalg.norm(V - V[0], axis=1))
+    assert np.abs(d - exact).max() <= 1e-3 * exact.max()            # the 0.1 % target
