@@ -296,6 +296,28 @@ def _cut_island(V, F, loops):
     return c.F, c.vert_of, topology.boundary_loops(c.F, len(c.vert_of)), info
 
 
+def _one_triangle(V, F, boundary, options):
+    """The piece of an island of one triangle (``V`` (3,3), ``F`` (1,3), not degenerate): the
+    triangle laid out as it is, which is the conformal map of every boundary mode (an isometry),
+    centred at the origin, with the report ``_flatten_island`` would give. A triangle soup is
+    thousands of such islands; the disk pipeline took 2 ms for each."""
+    P = V[F[0]]
+    a, b = P[1] - P[0], P[2] - P[0]
+    aa, bb, ab = float(a @ a), float(b @ b), float(a @ b)
+    la = np.sqrt(aa)
+    uv = np.zeros((len(V), 2))
+    uv[F[0]] = [[0.0, 0.0], [la, 0.0], [ab / la, np.sqrt(max(aa * bb - ab * ab, 0.0)) / la]]
+    uv -= uv[F[0]].mean(0)
+    # the measures of an isometry (``uv_measures`` would give them to round-off, at 1 ms a triangle)
+    rep = {'loops': 1, 'faces': 1, 'flips': 0, 'mu_ratio': 1.0, 'mu_ratio_p1_p99': 1.0, 'qc_mean': 1.0,
+           'qc_max': 1.0, 'overlaps': 0, 'vertex_ratio': 1.0,
+           'operators': {'mode': 'auto', 'intrinsic': False}, 'seconds': 0.0, 'boundary_used': boundary}
+    if options.get('bound'):
+        rep['bound_vertex'] = 1.0                  # no interior vertex: the certified optimum is 1
+    rep['warnings'] = _island_warnings(rep)
+    return np.arange(1), F, np.arange(len(V)), uv, rep
+
+
 def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=None):
     """Flatten one connected island (local ``V`` (n,3), ``F`` (m,3)), choosing how to treat its holes
     and repairing overlaps. Returns a list of pieces ``(faces (k,) rows of F, Fp (k,3) piece vertex ids,
@@ -668,8 +690,9 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
     tri_of = R.face_map                                  # input face of each repaired face
     pieces = []                                          # (faces of R.F, Fp, vert_of (input), uv, rep)
     repeats = Repeats()                                  # islands of the same shape are solved once
+    vert_start = cut.vert_start
     for i, faces in enumerate(island_faces):
-        lo, hi = cut.vert_start[i], cut.vert_start[i + 1]
+        lo, hi = vert_start[i], vert_start[i + 1]
         Fi = cut.F[faces] - lo
         Vi = R.V[cut.vert_of[lo:hi]]
         desc = _describe(i, n_cut, tri_of[faces], tri_poly)
@@ -680,8 +703,9 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
 
         poly_i = None if tri_poly is None else tri_poly[tri_of[faces]]
         try:
-            same = repeats.find(Vi, Fi, poly_i)
-            if same is None:
+            if len(Fi) == 1 and not zero[faces[0]]:
+                got = [_one_triangle(Vi, Fi, boundary, options)]      # no search for repeats, no store
+            elif (same := repeats.find(Vi, Fi, poly_i)) is None:
                 got = _solve_island(Vi, Fi, holes, boundary, desc, sub, options, poly=poly_i)
                 repeats.add(Vi, Fi, poly_i, desc, got)
             else:

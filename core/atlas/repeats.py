@@ -105,21 +105,24 @@ def match(V0, F0, poly0, V, F, poly, tol=REPEAT_TOL):
     return match_shape(Shape(V0, F0, poly0), V, F, poly, tol)
 
 
-def match_shape(shape, V, F, poly, tol=REPEAT_TOL):
+def match_shape(shape, V, F, poly, tol=REPEAT_TOL, this=None):
     """Correspondence of the island ``V`` (n,3), ``F`` (m,3), ``poly`` (m,) or None onto the ``Shape``
     ``shape``: (vertex (n,) vertex of the original of each vertex, face (m,) triangle of the original
     of each triangle, shift (m,), mirror (bool)): corner ``c`` of a triangle is the original's corner
     ``(CORNERS[mirror][c] + shift) % 3``. None when they are not the same mesh up to a rotation and a
-    translation, or a reflection with the triangles turned the other way."""
+    translation, or a reflection with the triangles turned the other way. ``this``: the island's own
+    ``Shape`` if the caller has it (its frame and side lengths are then computed once for all the
+    shapes it is matched against)."""
     if shape.V.shape != V.shape or shape.F.shape != F.shape or (shape.poly is None) != (poly is None):
         return None
+    this = Shape(V, F, poly) if this is None else this
     _, r0, w0 = shape.frame
-    P, r, w = principal_frame(V)
+    P, r, w = this.frame
     if not r0 > 0 or abs(r - r0) > tol * r0 or np.abs(w - w0).max() > 4 * tol * r0 * r0 * len(V):
         return None
     # the same mesh moved has the same side lengths: a cheap test before the matching (spot's two
     # halves have the same vertices, triangulated differently)
-    if np.abs(shape.sides - side_lengths(V, F)).max() > 2 * tol * r0:
+    if np.abs(shape.sides - this.sides).max() > 2 * tol * r0:
         return None
     if np.diff(w0).min() <= 1e-6 * max(w0[-1], 1e-300):
         return None                                   # axes not determined: no frame to match in
@@ -153,14 +156,24 @@ class Repeats:
     def __init__(self, tol: float = REPEAT_TOL):
         self.tol = tol
         self._seen = {}                       # (n, m) -> [(Shape, desc, pieces)]
+        self._radii = {}                      # (n, m) -> [radius of each of those shapes]
 
     def find(self, V, F, poly=None):
         """(desc of the island it repeats, that island's pieces renumbered for this one) for the island
         ``V`` (n,3), ``F`` (m,3), ``poly`` (m,) or None, or None if no island solved so far has its
         shape. A piece is ``(faces (k,) rows of F, Fp (k,3) piece vertex ids, pv (N,) local vertex of
         each piece vertex, uv (N,2), report)``, as ``_solve_island`` returns them."""
-        for shape, desc, pieces in self._seen.get((len(V), len(F)), ()):
-            got = match_shape(shape, V, F, poly, self.tol)
+        key = (len(V), len(F))
+        if key not in self._seen:
+            return None
+        this = Shape(V, F, poly)
+        r = this.frame[1]
+        # only the shapes of about this radius are matched: a triangle soup of k distinct triangles
+        # matched each against all before it (bump at 2048: 53 s)
+        radii = np.array(self._radii[key])
+        for i in np.flatnonzero(np.abs(radii - r) <= self.tol * radii).tolist():
+            shape, desc, pieces = self._seen[key][i]
+            got = match_shape(shape, V, F, poly, self.tol, this)
             if got is None:
                 continue
             vertex, face, shift, mirror = got
@@ -182,4 +195,6 @@ class Repeats:
     def add(self, V, F, poly, desc, pieces):
         """Keep the solved ``pieces`` of the island ``desc`` with positions ``V`` (n,3), ``F`` (m,3)
         and ``poly`` (m,) or None."""
-        self._seen.setdefault((len(V), len(F)), []).append((Shape(V, F, poly), desc, copy.deepcopy(pieces)))
+        shape = Shape(V, F, poly)
+        self._seen.setdefault((len(V), len(F)), []).append((shape, desc, copy.deepcopy(pieces)))
+        self._radii.setdefault((len(V), len(F)), []).append(shape.frame[1])
