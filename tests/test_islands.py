@@ -571,7 +571,7 @@ def test_a_triangle_soup_is_laid_out_triangle_by_triangle(monkeypatch):
     """A triangle soup (every triangle its own vertices, as an STL file stores it) is as many islands
     as triangles. Each one-triangle island is laid out as it is, with the report the disk pipeline
     gives it, and without a search for repeats: a 2048-triangle soup took 53 s, each island matched
-    against all before it."""
+    against all before it. With automatic seams, each part of one triangle likewise (27 s there)."""
     import core.atlas.islands as islands
     from core.atlas.islands import _one_triangle, _solve_island
     from core.surfaces import make_surface
@@ -599,3 +599,15 @@ def test_a_triangle_soup_is_laid_out_triangle_by_triangle(monkeypatch):
         assert fast[4][k] == pytest.approx(rep[k], abs=1e-12)
     d_fast = np.linalg.norm(fast[3][:, None] - fast[3][None], axis=2)
     assert np.allclose(d_fast, np.linalg.norm(uv[:, None] - uv[None], axis=2), atol=1e-12)
+    # with automatic seams too: each part of one triangle as cone_unwrap lays it out (11 ms a part)
+    import core.atlas.cones as cones
+    from core.atlas.cones import cone_unwrap, one_triangle
+    full, quick = cone_unwrap(P, T), one_triangle(P, T)
+    assert np.abs(full.uv - quick.uv).max() < 1e-12 and set(full.report) == set(quick.report)
+    for k, v in full.report.items():
+        if k not in ('seconds', 'angle_candidates', 'layouts'):
+            assert quick.report[k] == (pytest.approx(v, abs=1e-12) if isinstance(v, float) else v), k
+    monkeypatch.setattr(cones, 'cone_unwrap', lambda *a, **k: pytest.fail("a one-triangle part placed cones"))
+    from core import unwrap as unwrap_any
+    res = unwrap_any(Vs, Fs, cones='auto')
+    assert res.report['islands'] == len(Fs) and res.report['flips'] == 0 and res.report['cones'] == 0

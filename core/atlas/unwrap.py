@@ -501,6 +501,7 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
     genus). cones: 'auto' (the fewest cones reaching ``target_ratio`` for the 1%/99% scale ratio, at
     most ``max_cones``) or a cone budget per part (int). Returns (uv_corner (m,3,2), face_island (m,),
     islands (list of report dicts), seams (k,2), cones (list of (vertex, kappa)))."""
+    from .cones import one_triangle
     report_progress = progress or (lambda f, msg: None)
     n, m = len(V), len(F)
     n_parts, part = topology.face_components(F, n)
@@ -514,7 +515,10 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
         Fp = Fp.reshape(-1, 3)
         share = len(tris) / m
         sub = (lambda f, msg, b=done, w=share: report_progress(0.05 + 0.85 * (b + w * f), msg))
-        res = _cone_part(V[used], Fp, cones, target_ratio, max_cones, sub)
+        if len(Fp) == 1 and len(used) == 3 and not degenerate_faces(V[used], Fp)[0]:
+            res = one_triangle(V[used], Fp, target_ratio)          # (a triangle soup's parts)
+        else:
+            res = _cone_part(V[used], Fp, cones, target_ratio, max_cones, sub)
         done += share
         r = dict(res.report)
         r.update({'island': p + 1, 'triangles': int(len(tris)),
