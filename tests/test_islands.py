@@ -573,7 +573,8 @@ def test_a_triangle_soup_is_laid_out_triangle_by_triangle(monkeypatch):
     gives it, and without a search for repeats: a 2048-triangle soup took 53 s, each island matched
     against all before it. With automatic seams, each part of one triangle likewise (27 s there)."""
     import core.atlas.islands as islands
-    from core.atlas.islands import _one_triangle, _solve_island
+    from core.atlas.islands import _flat_island, _solve_island
+    from core.atlas.unfold import unfold_flat_disk
     from core.surfaces import make_surface
     V, F = make_surface('bump', 17)
     rng = np.random.default_rng(3)
@@ -588,26 +589,62 @@ def test_a_triangle_soup_is_laid_out_triangle_by_triangle(monkeypatch):
     ratio = euv / e3                                     # one scale for the whole layout
     assert np.allclose(ratio, ratio.mean(), rtol=1e-9)
     assert all(r['bound_vertex'] == 1.0 and r['qc_mean'] == 1.0 for r in res.islands)
-    # the same report and the same shape as the disk pipeline's
-    P = np.array([[0.0, 0.0, 0.0], [1.0, 0.2, 0.0], [0.3, 0.8, 0.4]])
-    T = np.array([[0, 1, 2]])
-    fast = _one_triangle(P, T, 'uniform', {'bound': True})
-    (_, _, _, uv, rep), = _solve_island(P, T, 'auto', 'uniform', 'x', None, {'bound': True})
-    assert set(fast[4]) == set(rep)
-    for k in ('flips', 'mu_ratio', 'mu_ratio_p1_p99', 'qc_mean', 'qc_max', 'bound_vertex', 'overlaps',
-              'loops'):
-        assert fast[4][k] == pytest.approx(rep[k], abs=1e-12)
-    d_fast = np.linalg.norm(fast[3][:, None] - fast[3][None], axis=2)
-    assert np.allclose(d_fast, np.linalg.norm(uv[:, None] - uv[None], axis=2), atol=1e-12)
-    # with automatic seams too: each part of one triangle as cone_unwrap lays it out (11 ms a part)
+    # the same report and the same shape as the disk pipeline's, on a triangle and on a bent strip
+    strip = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, .2], [1, 1, .3], [0, 2, .5], [1, 2.2, .4], [.1, 3, .9],
+                       [1, 3, 1.]]),
+             np.array([[0, 1, 3], [0, 3, 2], [2, 3, 5], [2, 5, 4], [4, 5, 7], [4, 7, 6]]))
+    one = (np.array([[0.0, 0.0, 0.0], [1.0, 0.2, 0.0], [0.3, 0.8, 0.4]]), np.array([[0, 1, 2]]))
+    for P, T in (one, strip):
+        uv_fast = unfold_flat_disk(P, T)
+        fast = _flat_island(len(T), 'uniform', {'bound': True})
+        (_, _, _, uv, rep), = _solve_island(P, T, 'auto', 'uniform', 'x', None, {'bound': True})
+        assert set(fast) == set(rep)
+        for k in ('flips', 'mu_ratio', 'mu_ratio_p1_p99', 'qc_mean', 'qc_max', 'bound_vertex', 'overlaps',
+                  'loops', 'faces'):
+            assert fast[k] == pytest.approx(rep[k], abs=1e-9), k
+        dist = lambda W: np.linalg.norm(W[:, None] - W[None], axis=2)          # noqa: E731
+        assert np.allclose(dist(uv_fast), dist(uv), atol=1e-9)
+    # with automatic seams too: each part with no interior vertex as cone_unwrap lays it out
     import core.atlas.cones as cones
-    from core.atlas.cones import cone_unwrap, one_triangle
-    full, quick = cone_unwrap(P, T), one_triangle(P, T)
-    assert np.abs(full.uv - quick.uv).max() < 1e-12 and set(full.report) == set(quick.report)
+    from core.atlas.cones import cone_unwrap, flat_part
+    P, T = strip
+    full, quick = cone_unwrap(P, T), flat_part(P, T, unfold_flat_disk(P, T))
+    d3 = lambda W: np.linalg.norm(W[:, :, None] - W[:, None], axis=3)           # noqa: E731
+    assert np.abs(d3(full.uv) - d3(quick.uv)).max() < 1e-9 and set(full.report) == set(quick.report)
     for k, v in full.report.items():
-        if k not in ('seconds', 'angle_candidates', 'layouts'):
-            assert quick.report[k] == (pytest.approx(v, abs=1e-12) if isinstance(v, float) else v), k
+        if k not in ('seconds', 'angle_candidates', 'layouts', 'placement'):
+            assert quick.report[k] == (pytest.approx(v, abs=1e-9) if isinstance(v, float) else v), k
     monkeypatch.setattr(cones, 'cone_unwrap', lambda *a, **k: pytest.fail("a one-triangle part placed cones"))
     from core import unwrap as unwrap_any
     res = unwrap_any(Vs, Fs, cones='auto')
     assert res.report['islands'] == len(Fs) and res.report['flips'] == 0 and res.report['cones'] == 0
+
+
+def test_islands_with_no_interior_vertex_are_unfolded_and_checked():
+    """Hair cards (quads and strips bent out of their plane) are unfolded isometrically; a strip that
+    would unfold onto itself is not taken (None: the full pipeline splits it), nor is an island with
+    an interior vertex."""
+    from core.atlas.unfold import unfold_flat_disk
+    from core.surfaces import make_surface
+    rng = np.random.default_rng(5)
+    Vs, Fs = [], []
+    for i in range(300):                  # quads of random shape, bent along their diagonal
+        P = np.array([[0, 0, 0], [rng.uniform(.05, .2), 0, 0], [.2, rng.uniform(.5, 2), rng.uniform(0, .3)],
+                      [0, 1, 0]]) @ np.linalg.qr(rng.normal(size=(3, 3)))[0] + rng.uniform(-5, 5, 3)
+        Vs.append(P)
+        Fs.append(np.array([[0, 1, 2], [0, 2, 3]]) + 4 * i)
+    V, F = np.concatenate(Vs), np.concatenate(Fs)
+    res = unwrap(V, F)
+    assert res.report['islands'] == 300 and res.report['flips'] == 0
+    e3 = np.linalg.norm(V[F] - V[np.roll(F, -1, axis=1)], axis=2)
+    W = res.uv[res.F]
+    ratio = np.linalg.norm(W - np.roll(W, -1, axis=1), axis=2) / e3
+    assert np.allclose(ratio, ratio.mean(), rtol=1e-9)
+    # a fan strip turning 1.75 turns round a point: its unfolding overlaps itself
+    t = np.linspace(0, 3.5 * np.pi, 36)
+    ring = np.c_[np.cos(t), np.sin(t), 0.05 * t]
+    Vc = np.r_[ring, 0.5 * ring + [0, 0, 0.3]]
+    Fc = np.array([f for i in range(35) for f in ([i, i + 1, 36 + i + 1], [i, 36 + i + 1, 36 + i])])
+    assert len(Fc) <= 72 and unfold_flat_disk(Vc, Fc, max_faces=100) is None
+    V, F = make_surface('bump', 5)                       # interior vertices
+    assert unfold_flat_disk(V, F) is None

@@ -2173,31 +2173,26 @@ def polyhedral_cones(system, max_cones, tol=POLYHEDRAL_DEFECT):
     return S.astype(np.int64), kappa
 
 
-def one_triangle(V, F, target_ratio=0.5):
-    """``cone_unwrap`` of a part of one triangle (``V`` (3,3), ``F`` (1,3), not degenerate), without
-    its machinery: no cone, no cut, the triangle laid out as it is (corners centred on the origin,
-    mesh units), with the report ``cone_unwrap`` gives it. A triangle soup is thousands of such parts:
-    11 ms each through ``cone_unwrap``. Returns ``ConeResult``."""
-    P = np.asarray(V, np.float64)[F[0]]
-    a, b = P[1] - P[0], P[2] - P[0]
-    aa, bb, ab = float(a @ a), float(b @ b), float(a @ b)
-    la = np.sqrt(aa)
-    W = np.array([[0.0, 0.0], [la, 0.0], [ab / la, np.sqrt(max(aa * bb - ab * ab, 0.0)) / la]])
-    W -= W.mean(0)
-    from ..mesh.geometry import corner_angles
-    rep = {'vertices': len(V), 'faces': 1, 'genus': 0, 'boundary_loops': 1, 'euler': 1, 'split_vertices': 0,
+def flat_part(V, F, uv, target_ratio=0.5):
+    """``cone_unwrap`` of a part with no interior vertex (``V`` (n,3), ``F`` (m,3)) that
+    ``unfold.unfold_flat_disk`` laid out as ``uv`` (n,2), without its machinery: no cone can be
+    placed (cones are interior vertices) and the map is that isometry. The report is the one
+    ``cone_unwrap`` gives such a part. A triangle soup or a mesh of hair cards is thousands of such
+    parts: 11 ms each through ``cone_unwrap``. Returns ``ConeResult``."""
+    from ..mesh.geometry import angle_sums
+    n, m = len(V), len(F)
+    rep = {'vertices': n, 'faces': m, 'genus': 0, 'boundary_loops': 1, 'euler': 1, 'split_vertices': 0,
            'cones': 0, 'kappa_sum': 0.0, 'kappa_min': 0.0, 'kappa_max': 0.0, 'flips': 0, 'mu_ratio': 1.0,
            'mu_ratio_p1_p99': 1.0, 'qc_mean': 1.0, 'qc_max': 1.0, 'mu_ratio_p1_p99_area': 1.0,
            'degenerate': 0, 'overlaps': 0, 'seam_edges': 0, 'seam_length': 0.0, 'seam_fraction': 0.0,
-           'branches_added': 0,
-           'max_wedge': float(corner_angles(P, np.array([[0, 1, 2]])).max()), 'repair_rounds': 0,
+           'branches_added': 0, 'max_wedge': float(angle_sums(V, F, n).max()), 'repair_rounds': 0,
            'exact_layout': True, 'charts': 1, 'chart_splits': 0, 'vertex_ratio': 1.0,
            'vertex_ratio_outside_rings': 1.0, 'estimated_p1_p99': 1.0, 'target_ratio': target_ratio,
            'placement': [], 'seconds': {'total': 0.0}, 'angles': 'placement', 'angle_candidates': [],
            'layouts': 0, 'warnings': []}
-    u = np.zeros(len(V))
-    return ConeResult(uv=W[None], seams=np.zeros((0, 2), np.int64), cones=np.zeros(0, np.int64),
-                      kappa=np.zeros(0), u=u, report=rep)
+    W = uv[F]
+    return ConeResult(uv=W - W.reshape(-1, 2).mean(0), seams=np.zeros((0, 2), np.int64),
+                      cones=np.zeros(0, np.int64), kappa=np.zeros(0), u=np.zeros(n), report=rep)
 
 
 def clean_ratio(best):

@@ -37,6 +37,7 @@ from ..mesh.repair import repair, repair_merged, zero_area_note
 from ..disk.flatten import QC_WARN, SCALE_REMEDY, scale_variation
 from .charts import split_overlaps
 from .repeats import Repeats
+from .unfold import FLAT_TREE_MAX, unfold_flat_disk
 from .cut import (Cut, _seam_halfedges, boundary_crossings, cut_along_seams, seam_edge_counts,  # noqa: F401
                   seam_pairs, shelf_pack)
 from ..mesh.validate import (DEFAULT_MAX_FACES, check_arrays, degenerate_faces, loose_edge_count,
@@ -296,26 +297,19 @@ def _cut_island(V, F, loops):
     return c.F, c.vert_of, topology.boundary_loops(c.F, len(c.vert_of)), info
 
 
-def _one_triangle(V, F, boundary, options):
-    """The piece of an island of one triangle (``V`` (3,3), ``F`` (1,3), not degenerate): the
-    triangle laid out as it is, which is the conformal map of every boundary mode (an isometry),
-    centred at the origin, with the report ``_flatten_island`` would give. A triangle soup is
-    thousands of such islands; the disk pipeline took 2 ms for each."""
-    P = V[F[0]]
-    a, b = P[1] - P[0], P[2] - P[0]
-    aa, bb, ab = float(a @ a), float(b @ b), float(a @ b)
-    la = np.sqrt(aa)
-    uv = np.zeros((len(V), 2))
-    uv[F[0]] = [[0.0, 0.0], [la, 0.0], [ab / la, np.sqrt(max(aa * bb - ab * ab, 0.0)) / la]]
-    uv -= uv[F[0]].mean(0)
-    # the measures of an isometry (``uv_measures`` would give them to round-off, at 1 ms a triangle)
-    rep = {'loops': 1, 'faces': 1, 'flips': 0, 'mu_ratio': 1.0, 'mu_ratio_p1_p99': 1.0, 'qc_mean': 1.0,
-           'qc_max': 1.0, 'overlaps': 0, 'vertex_ratio': 1.0,
+def _flat_island(n_faces, boundary, options):
+    """The report ``_flatten_island`` would give an island of ``n_faces`` triangles that
+    ``unfold.unfold_flat_disk`` laid out: the measures of an isometry (the conformal map of every
+    boundary mode; ``uv_measures`` gives them to round-off, at a millisecond an island), and a
+    certified bound of 1 (no interior vertex). Hair cards and triangle soups are thousands of such
+    islands."""
+    rep = {'loops': 1, 'faces': int(n_faces), 'flips': 0, 'mu_ratio': 1.0, 'mu_ratio_p1_p99': 1.0,
+           'qc_mean': 1.0, 'qc_max': 1.0, 'overlaps': 0, 'vertex_ratio': 1.0,
            'operators': {'mode': 'auto', 'intrinsic': False}, 'seconds': 0.0, 'boundary_used': boundary}
     if options.get('bound'):
-        rep['bound_vertex'] = 1.0                  # no interior vertex: the certified optimum is 1
+        rep['bound_vertex'] = 1.0
     rep['warnings'] = _island_warnings(rep)
-    return np.arange(1), F, np.arange(len(V)), uv, rep
+    return rep
 
 
 def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=None):
@@ -703,8 +697,11 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
 
         poly_i = None if tri_poly is None else tri_poly[tri_of[faces]]
         try:
-            if len(Fi) == 1 and not zero[faces[0]]:
-                got = [_one_triangle(Vi, Fi, boundary, options)]      # no search for repeats, no store
+            flat = None if len(Fi) > FLAT_TREE_MAX or zero[faces].any() else unfold_flat_disk(Vi, Fi)
+            if flat is not None:
+                # no interior vertex (a card, a soup's triangle): unfolded as it is, no repeat search
+                rep_i = _flat_island(len(Fi), boundary, options)
+                got = [(np.arange(len(Fi)), Fi, np.arange(len(Vi)), flat, rep_i)]
             elif (same := repeats.find(Vi, Fi, poly_i)) is None:
                 got = _solve_island(Vi, Fi, holes, boundary, desc, sub, options, poly=poly_i)
                 repeats.add(Vi, Fi, poly_i, desc, got)

@@ -501,7 +501,8 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
     genus). cones: 'auto' (the fewest cones reaching ``target_ratio`` for the 1%/99% scale ratio, at
     most ``max_cones``) or a cone budget per part (int). Returns (uv_corner (m,3,2), face_island (m,),
     islands (list of report dicts), seams (k,2), cones (list of (vertex, kappa)))."""
-    from .cones import one_triangle
+    from .cones import flat_part
+    from .unfold import FLAT_TREE_MAX, unfold_flat_disk
     report_progress = progress or (lambda f, msg: None)
     n, m = len(V), len(F)
     n_parts, part = topology.face_components(F, n)
@@ -515,8 +516,10 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
         Fp = Fp.reshape(-1, 3)
         share = len(tris) / m
         sub = (lambda f, msg, b=done, w=share: report_progress(0.05 + 0.85 * (b + w * f), msg))
-        if len(Fp) == 1 and len(used) == 3 and not degenerate_faces(V[used], Fp)[0]:
-            res = one_triangle(V[used], Fp, target_ratio)          # (a triangle soup's parts)
+        flat = None if len(Fp) > FLAT_TREE_MAX or degenerate_faces(V[used], Fp).any() else \
+            unfold_flat_disk(V[used], Fp)
+        if flat is not None:                  # no interior vertex (a card, a soup's triangle): no cone
+            res = flat_part(V[used], Fp, flat, target_ratio)
         else:
             res = _cone_part(V[used], Fp, cones, target_ratio, max_cones, sub)
         done += share
