@@ -57,12 +57,17 @@ def _tree_parity(n_nodes, rows, cols, par):
     G = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_nodes, n_nodes)).tocsr()
     G = ((G + G.T) > 0).astype(np.int8)
     ncomp, lab = connected_components(G, directed=False)
-    pred = np.full(n_nodes, -1, np.int64)
     roots = np.unique(lab, return_index=True)[1]
-    for r in roots[np.bincount(lab)[lab[roots]] > 1].tolist():       # one BFS per component with edges
-        _, p = breadth_first_order(G, r, directed=False, return_predecessors=True)
-        hit = p >= 0
-        pred[hit] = p[hit]
+    # one breadth-first search from a virtual node joined to every component's root: the same trees
+    # as a search from each root (within a component the queue keeps its own order), in one pass (a
+    # search per component cost the whole graph each time: 0.8 s for 2000 hair cards)
+    S = sp.coo_matrix((np.ones(len(roots), np.int8), (np.full(len(roots), n_nodes), roots)),
+                      shape=(n_nodes + 1, n_nodes + 1))
+    H = sp.bmat([[G, None], [None, sp.csr_matrix((1, 1), dtype=np.int8)]]).tocsr() + S + S.T
+    _, p = breadth_first_order(H, n_nodes, directed=False, return_predecessors=True)
+    pred = p[:n_nodes].astype(np.int64)
+    pred[pred == n_nodes] = -1
+    pred[pred < 0] = -1
     # parity of each tree edge (node, pred[node])
     key = np.minimum(rows, cols) * n_nodes + np.maximum(rows, cols)
     order = np.argsort(key)
