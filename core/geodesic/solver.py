@@ -58,6 +58,7 @@ from ..errors import ConformalError
 from ..mesh.geometry import edge_graph, face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
 from .planar import plane_coordinates, planar_paths
+from ..atlas.unfold import unfold_flat_disk
 from .paths import (PATH_BUDGET, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, SteinerGraph, path_points,
                     path_triangulation, thin_warning, steiner_distances, surface_paths)
 
@@ -1719,6 +1720,10 @@ class GeodesicSolver:
             else:
                 P = plane_coordinates(Vs[verts], Fl) if method == 'auto' and grid is None and \
                     self.steiner_points is None else None
+                if P is None and method == 'auto' and grid is None and self.steiner_points is None:
+                    # no interior vertex (a hair card bent out of its plane, a strip): its isometric
+                    # unfolding is a flat domain with the same distances
+                    P = unfold_flat_disk(Vs[verts], Fl)
                 flat = planar_paths(P, Fl) if P is not None else None
                 if flat is not None:            # a flat island: exact, no grid (``PlanarChart``)
                     if report['boundary'] == 'given':
