@@ -58,16 +58,23 @@ def _tree_parity(n_nodes, rows, cols, par):
     G = ((G + G.T) > 0).astype(np.int8)
     ncomp, lab = connected_components(G, directed=False)
     roots = np.unique(lab, return_index=True)[1]
-    # one breadth-first search from a virtual node joined to every component's root: the same trees
-    # as a search from each root (within a component the queue keeps its own order), in one pass (a
-    # search per component cost the whole graph each time: 0.8 s for 2000 hair cards)
-    S = sp.coo_matrix((np.ones(len(roots), np.int8), (np.full(len(roots), n_nodes), roots)),
-                      shape=(n_nodes + 1, n_nodes + 1))
-    H = sp.bmat([[G, None], [None, sp.csr_matrix((1, 1), dtype=np.int8)]]).tocsr() + S + S.T
-    _, p = breadth_first_order(H, n_nodes, directed=False, return_predecessors=True)
-    pred = p[:n_nodes].astype(np.int64)
-    pred[pred == n_nodes] = -1
-    pred[pred < 0] = -1
+    roots = roots[np.bincount(lab)[lab[roots]] > 1]                  # the components with edges
+    if len(roots) <= 1:
+        pred = np.full(n_nodes, -1, np.int64)
+        if len(roots):
+            p = breadth_first_order(G, int(roots[0]), directed=False, return_predecessors=True)[1]
+            pred[p >= 0] = p[p >= 0]
+    else:
+        # one breadth-first search from a virtual node joined to every component's root: the same
+        # trees as a search from each root (within a component the queue keeps its own order), in
+        # one pass (a search per component cost the whole graph each time: 0.8 s for 2000 hair cards)
+        hub = np.full(len(roots), n_nodes)
+        Gc = G.tocoo()
+        H = sp.csr_matrix((np.ones(Gc.nnz + 2 * len(roots), np.int8),
+                           (np.r_[Gc.row, hub, roots], np.r_[Gc.col, roots, hub])),
+                          shape=(n_nodes + 1, n_nodes + 1))
+        p = breadth_first_order(H, n_nodes, directed=True, return_predecessors=True)[1][:n_nodes]
+        pred = np.where((p >= 0) & (p < n_nodes), p, -1).astype(np.int64)
     # parity of each tree edge (node, pred[node])
     key = np.minimum(rows, cols) * n_nodes + np.maximum(rows, cols)
     order = np.argsort(key)
