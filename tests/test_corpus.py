@@ -47,6 +47,22 @@ def test_teapot_non_manifold_vertices_split_and_tubes_cut():
     assert res.report['holes_cut'] > 0
 
 
+def test_no_island_keeps_a_squashed_triangle():
+    """A map that squashes a triangle flat (s1/s2 above 1e3) is a defect like a flip. Teapot in
+    ``area`` mode with its OBJ seams: a ring's filled map squashed a boundary triangle (mu_ratio
+    1.8e-8, qc_mean 2e10, two warnings) and was kept over the cut one, which overlapped once. The cut
+    one is taken now and split into charts where it overlaps."""
+    from core.atlas.islands import seams_from_corner_ids
+    mesh = read_obj(os.path.join(DATA, 'teapot.obj'))
+    tc, tp = triangulate(mesh.corner_verts, mesh.sizes, mesh.V)
+    F = mesh.corner_verts[tc]
+    seams = seams_from_corner_ids(F, mesh.corner_uvs[tc], len(mesh.V))
+    res = unwrap(mesh.V, F, seams=seams, boundary='area', tri_poly=tp)
+    _check_clean(res, F)
+    assert all(i['qc_max'] <= 1e3 for i in res.islands)
+    assert res.report['mu_ratio_worst'] > 0.3 and not res.report['warnings']
+
+
 def test_cow_closed_after_split_gives_the_one_error():
     V, F, _ = _load('cow.obj')
     assert [x['repair'] for x in repair(V, F).repairs] == ['vertices_split']

@@ -264,15 +264,23 @@ def _island_warnings(rep):
     return list(dict.fromkeys(w))
 
 
+def _squashed(rep):
+    """True if the map of the report ``rep`` squashes a triangle nearly flat (s1/s2 above
+    ``SQUASHED_QC``): a defect like a flip (the triangle's texture is a smear)."""
+    return not rep.get('qc_max', np.inf) <= SQUASHED_QC
+
+
 def _score(rep):
-    """Sort key of a candidate map (lower is better): no flips and no overlaps first, then qc_mean
-    within the warning budget, then the larger mu_ratio."""
+    """Sort key of a candidate map (lower is better): no flips, no overlaps and no squashed triangle
+    first, then qc_mean within the warning budget, then the larger mu_ratio."""
     mu = rep.get('mu_ratio', 0.0)
     mu = mu if np.isfinite(mu) else 0.0
-    return (rep.get('flips', 1) + rep.get('overlaps', 1) > 0, not rep.get('qc_mean', np.inf) <= QC_WARN, -mu)
+    return (rep.get('flips', 1) + rep.get('overlaps', 1) > 0 or _squashed(rep),
+            not rep.get('qc_mean', np.inf) <= QC_WARN, -mu)
 
 
 DETACH_QC = 10.0                 # triangles this sheared in an island's best map are detached
+SQUASHED_QC = 1e3                # a map with a triangle this sheared is defective (``_squashed``)
 AUTO_TRY_BOTH_FACES = 150_000    # holes='auto' flattens both ways up to this size, else decides by geometry
 
 
@@ -362,7 +370,7 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=
             first_error = first_error or exc
 
     def clean():
-        return any(c[4]['flips'] + c[4]['overlaps'] == 0 for c in cands)
+        return any(c[4]['flips'] + c[4]['overlaps'] == 0 and not _squashed(c[4]) for c in cands)
 
     for mode in modes:
         attempt(mode, boundary)
@@ -394,7 +402,7 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=
         rep['holes']['auto'] = {f"{c[4].get('holes', {}).get('mode', 'none')}/{c[4]['boundary_used']}":
                                 {k: c[4][k] for k in ('mu_ratio', 'qc_mean', 'flips', 'overlaps')}
                                 for c in cands}
-    if rep['flips'] + rep['overlaps'] == 0 or len(F) < 4:
+    if (rep['flips'] + rep['overlaps'] == 0 and not _squashed(rep)) or len(F) < 4:
         rep['warnings'] = _island_warnings(rep)
         return [best]
     if rep['overlaps'] and not rep['flips']:
