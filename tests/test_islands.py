@@ -648,3 +648,7 @@ def test_islands_with_no_interior_vertex_are_unfolded_and_checked():
     assert len(Fc) <= 72 and unfold_flat_disk(Vc, Fc, max_faces=100) is None
     V, F = make_surface('bump', 5)                       # interior vertices
     assert unfold_flat_disk(V, F) is None
+    # a side of zero length (coincident vertices) or a collinear triangle: not unfolded
+    P = np.array([[0.0, 0, 0], [1, 0, 0], [1, 0, 0], [0, 1, 0]])
+    assert unfold_flat_disk(P, np.array([[0, 1, 3], [1, 2, 3]])) is None
+    assert unfold_flat_disk(np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]), np.array([[0, 1, 2]])) is None

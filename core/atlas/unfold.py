@@ -24,12 +24,15 @@ def unfold_flat_disk(V, F, max_faces=FLAT_TREE_MAX):
     n, m = len(V), len(F)
     if m > max_faces or n != m + 2:              # a disk of m triangles with no interior vertex
         return None
+    P = np.asarray(V, np.float64)
+    side = np.linalg.norm(P[F] - P[np.roll(F, -1, axis=1)], axis=2)
+    if not (side > 0).all():                     # a zero-length side (coincident vertices)
+        return None
     twin = topology.twin_halfedges(F, n)
     loops = topology.boundary_loops(F, n, twin=twin)
     if len(loops) != 1 or len(loops[0]) != n:
         return None
     uv = np.full((n, 2), np.nan)
-    P = np.asarray(V, np.float64)
 
     def third(i, j, k):
         """Place corner k of a counter-clockwise triangle (i, j, k), i and j placed."""
