@@ -958,3 +958,18 @@ def test_cached_column_products_equal_the_direct_ones(monkeypatch):
         assert np.allclose(M, G.T @ (w[:, None] * G), rtol=1e-12, atol=1e-14)
         assert np.allclose(m, G.T @ w, rtol=1e-12, atol=1e-14)
         assert np.allclose(b, G.T @ (w * system.u0), rtol=1e-12, atol=1e-14)
+
+
+def test_automatic_seams_name_a_part_with_no_area():
+    """With automatic seams a part whose triangles all have zero area raised an IndexError (its
+    measures were taken over no triangle), and a mesh with no triangle of three different vertices a
+    ValueError. Both are ConformalErrors now, as on the island path: the first names the part."""
+    from core import unwrap
+    V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1.0]])
+    named = r"part 1 of 2 \(1 triangles\): every triangle has zero area"
+    with pytest.raises(ConformalError, match=named) as err:
+        unwrap(V, np.array([[0, 1, 2], [3, 4, 5]]), cones='auto')
+    assert err.value.code == 'degenerate' and err.value.remedy == 'clean_mesh'
+    with pytest.raises(ConformalError) as err:
+        unwrap(V, np.array([[0, 0, 1], [3, 4, 4]]), cones='auto')
+    assert err.value.code == 'empty_mesh'

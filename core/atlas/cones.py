@@ -1866,6 +1866,8 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
     orig = vert_of0[keep]                     # input vertex of each working vertex
     Vw, unit = normalise_scale(Vs[keep])
     n = len(Vw)
+    if degenerate_faces(Vw, Fw).all():
+        raise ConformalError("every triangle has zero area", 'degenerate', 'clean_mesh')
     if n_split:
         warnings.append(f"{n_split} non-manifold vertex(es) were split (one copy per fan of faces)")
     timings['check'] = time.perf_counter() - t0

@@ -240,6 +240,8 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         disk = False          # the map overlaps itself: the island pipeline splits it into charts
     if cones is not None:
         fixed, root = repair_merged(Vs, Fs)     # messy input: the same internal repairs as islands
+        if len(fixed.F) == 0:
+            raise ConformalError("mesh has no triangle with three different vertices", 'empty_mesh')
         zero = degenerate_faces(fixed.V, fixed.F)
         if zero.any():                          # kept: cone_unwrap mollifies them, as islands do
             fixed.repairs.append(zero_area_note(int(zero.sum())))
@@ -521,7 +523,12 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
         if flat is not None:                  # no interior vertex (a card, a soup's triangle): no cone
             res = flat_part(V[used], Fp, flat, target_ratio)
         else:
-            res = _cone_part(V[used], Fp, cones, target_ratio, max_cones, sub)
+            try:
+                res = _cone_part(V[used], Fp, cones, target_ratio, max_cones, sub)
+            except ConformalError as exc:
+                if n_parts == 1 or exc.problem.startswith('part '):
+                    raise
+                raise exc.with_context(f"part {p + 1} of {n_parts} ({len(tris)} triangles)") from None
         done += share
         r = dict(res.report)
         r.update({'island': p + 1, 'triangles': int(len(tris)),
