@@ -1631,3 +1631,24 @@ def test_a_bent_strip_is_measured_as_its_flat_unfolding():
     # round the reflex corner (5, 1) of the L: the exact distance bends there
     far = vid(5, 6)
     assert flat[far] == pytest.approx(np.hypot(5, 0) + 5.0, rel=1e-12)
+
+
+def test_a_march_that_cannot_start_falls_back_to_surface_paths():
+    """An island of near-degenerate triangles (three vertices within 1e-9 of each other, found by
+    fuzzing) gave scikit-fmm no seed rim: its ValueError ('no zero contour') escaped the solver. The
+    march that cannot start is answered by surface paths, with the warning."""
+    V = np.array([[-7.7720042914370668e-01, 2.6687345024835568e-01, -2.1281758924154354e-01],
+                  [-2.4442981881712935e+00, -4.5485312025100172e-01, -1.7667718398053194e+00],
+                  [-2.4442981877990260e+00, -4.5485311939001799e-01, -1.7667718394458671e+00],
+                  [-2.4442981870308875e+00, -4.5485311905791243e-01, -1.7667718419611029e+00],
+                  [-2.4448021905018256e+00, -4.5563195542332624e-01, -1.7692954914109231e+00],
+                  [2.1983321006024386e-09, -5.5312999835435946e-10, -1.8321410456544528e-10],
+                  [2.1983321006024386e-09, -5.5312999835435946e-10, -1.8321410456544528e-10],
+                  [3.3428796198671435e-09, -1.7983656496588198e-09, 1.7184044461327565e-09],
+                  [4.2849983202474337e-09, -8.2334653650376310e-10, 5.5498238495626909e-10],
+                  [2.8914268663899800e-01, 9.9644164062048979e-01, -1.5734762519637444e-01]])
+    F = np.array([[0, 1, 2], [2, 1, 3], [2, 3, 4], [5, 6, 7], [7, 6, 8], [7, 8, 9]])
+    d, rep = geo.geodesic_distance(V, F, sources=[0])
+    assert rep['paths_fallback'] == 1
+    E = np.linalg.norm(V[:5] - V[0], axis=1)
+    assert np.isfinite(d[:5]).all() and (d[:5] >= E - 1e-12).all() and (d[:5] <= 1.01 * E + 1e-12).all()

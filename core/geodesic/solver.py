@@ -767,11 +767,16 @@ def eikonal_march(T_seed, seed, phi, speed, mask, h, solver='auto'):
     nodes with ``mask`` True excluded (returned inf), spacing ``h``. ``solver``: 'skfmm' (scikit-fmm
     travel time from the zero contour of ``phi``, order 2, plus the seed rim time), 'sweep'
     (``core.eikonal.sweep``, pure numpy, order 2, the seed held fixed), or 'auto' (scikit-fmm if it
-    imports). Returns (T, solver name)."""
+    imports). Returns (T, solver name). Raises ``_Unseeded`` where scikit-fmm finds no seed rim on
+    the unmasked nodes or a node it cannot reach (an island of near-degenerate triangles: the caller
+    answers it by surface paths instead)."""
     solver = resolve_solver(solver)
     if solver == 'skfmm':
         import skfmm
-        T = skfmm.travel_time(np.ma.MaskedArray(phi, mask), np.where(mask, 1.0, speed), dx=h, order=2)
+        try:
+            T = skfmm.travel_time(np.ma.MaskedArray(phi, mask), np.where(mask, 1.0, speed), dx=h, order=2)
+        except (ValueError, RuntimeError) as exc:     # 'no zero contour', 'Unreachable voxel'
+            raise _Unseeded(f"the march could not start: {exc}") from None
         T = np.ma.filled(np.ma.MaskedArray(T), np.inf).astype(np.float64)
         T[mask] = np.inf
         return T, 'skfmm'
