@@ -727,3 +727,22 @@ def test_reversed_faces_are_turned_not_refused():
     assert b.report['repairs'][0]['count'] == 6 and b.report['flips'] == 0
     assert np.allclose(a.S, b.S, atol=1e-9)
     assert np.allclose(sphere_geodesic(V, G, [3])[0], sphere_geodesic(V, F, [3])[0], rtol=1e-9)
+
+
+def test_a_map_far_from_conformal_falls_back_to_the_central_projection():
+    """Where the conformal map is far from conformal (qc_mean above 1.5) and the central projection
+    from the centroid folds nothing and is more conformal, the projection is kept. A tetrahedron,
+    either winding, came out with qc_mean 4e14 (its pole chart is one triangle); its vertices lie on
+    a sphere, so the projection is exact. A convex hull of random points (slivers, as a CAD export
+    gives) folded 264 of 1596 triangles; the projection folds none."""
+    from core.surfaces import hull_part
+    V = np.array([[1, 1, 1], [-1, -1, 1], [-1, 1, -1], [1, -1, -1.0]])
+    F = np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])
+    for FF in (F, F[:, ::-1]):
+        r = sphere_map(V, FF)
+        assert r.report['flips'] == 0 and r.report['mu_ratio'] > 1 - 1e-9 and r.report['qc_mean'] < 1 + 1e-9
+        assert not r.report['warnings'] and 'central projection' in r.report['start']
+    V, F = hull_part(n=800)
+    r = sphere_map(V, F)
+    assert r.report['flips'] == 0 and 'central projection' in r.report['start']
+    assert r.report['qc_mean'] < 5.0                       # warned (above 1.5), but 6.3 with the folds

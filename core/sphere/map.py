@@ -426,6 +426,31 @@ def _to_input(fixed, root, S, mu, V_in, m_in):
     return S_in, mu_in
 
 
+def _projection_if_better(V, F, real, S, info):
+    """``S`` (n,3), the conformal map, unless it is far from conformal (qc_mean above ``QC_WARN`` on
+    the ``real`` (m,) triangles) and the central projection of ``V`` (n,3) from its area-weighted
+    centroid folds no triangle and is more conformal: then that projection, with ``info['start']``
+    saying so. A mesh of a few triangles (a tetrahedron: the pole chart is one triangle) came out
+    with qc_mean 4e14, where the projection of a convex shape is the natural map."""
+    qc = sphere_measures(V, F[real], S)['qc_mean']
+    if qc <= QC_WARN:
+        return S
+    A = face_areas(V, F)
+    c = (V[F].mean(1) * A[:, None]).sum(0) / max(A.sum(), np.finfo(float).tiny)
+    P = V - c
+    r = np.linalg.norm(P, axis=1)
+    if not (r > 1e-9 * r.max()).all():
+        return S
+    P = P / r[:, None]
+    if _count_flips(F, P) == len(F):
+        P[:, 2] = -P[:, 2]                # a mesh wound inside out: its mirror image keeps the winding
+    m = sphere_measures(V, F[real], P)
+    if _count_flips(F, P) == 0 and m['flips'] == 0 and m['qc_mean'] < qc:
+        info['start'] = f"central projection (the conformal map's qc_mean was {qc:.3g})"
+        return P
+    return S
+
+
 def sphere_map(V: np.ndarray, F: np.ndarray, moebius: str = 'uniform', max_faces: int = DEFAULT_MAX_FACES,
                progress=None, **options) -> SphereResult:
     """Map a closed genus-0 triangle mesh conformally to the unit sphere and choose the Moebius
@@ -454,6 +479,7 @@ def sphere_map(V: np.ndarray, F: np.ndarray, moebius: str = 'uniform', max_faces
     timings = {'check': time.perf_counter() - t0}
     t = time.perf_counter()
     S, info = conformal_sphere(V, F, progress=lambda f, m: report_progress(0.5 * f, m))
+    S = _projection_if_better(V, F, real, S, info)
     timings['map'] = time.perf_counter() - t
     t = time.perf_counter()
     A = face_areas(V, F)
