@@ -33,7 +33,7 @@ from ..mesh.geometry import face_areas
 from ..mesh.measures import (determinants, flip_warning, jacobians, signed_uv_areas, singular_values,
                              uv_measures)
 from ..mesh import topology
-from ..mesh.repair import repair, repair_merged, zero_area_note
+from ..mesh.repair import repair, repair_merged, require_faces, zero_area_note
 from ..disk.flatten import QC_WARN, SCALE_REMEDY, scale_variation
 from .charts import split_overlaps
 from .repeats import Repeats
@@ -667,8 +667,7 @@ def unwrap(V, F, seams=None, boundary='uniform', holes='auto', island_scale='tru
         loose_e = loose_edge_count(edges, F)
         if loose_e:
             repairs.append({'repair': 'loose_edges_ignored', 'count': loose_e, 'note': 'edges in no face'})
-    if len(R.F) == 0:
-        raise ConformalError("mesh has no triangle with three different vertices", 'empty_mesh')
+    require_faces(R)
     zero = degenerate_faces(R.V, R.F)
     if zero.any():
         repairs.append(zero_area_note(int(zero.sum())))

@@ -37,7 +37,7 @@ from ..errors import ConformalError
 from ..disk.flatten import QC_WARN, SCALE_REMEDY, flatten, scale_variation
 from ..mesh import topology
 from ..mesh.geometry import face_areas
-from ..mesh.repair import repair_merged, zero_area_note
+from ..mesh.repair import repair_merged, require_faces, zero_area_note
 from ..mesh.measures import flip_warning, jacobians, measures_from_jacobians, signed_uv_areas, vertex_mu
 from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_mesh, degenerate_faces, loose_edge_count,
                              normalise_scale)
@@ -240,8 +240,7 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         disk = False          # the map overlaps itself: the island pipeline splits it into charts
     if cones is not None:
         fixed, root = repair_merged(Vs, Fs)     # messy input: the same internal repairs as islands
-        if len(fixed.F) == 0:
-            raise ConformalError("mesh has no triangle with three different vertices", 'empty_mesh')
+        require_faces(fixed)
         zero = degenerate_faces(fixed.V, fixed.F)
         if zero.any():                          # kept: cone_unwrap mollifies them, as islands do
             fixed.repairs.append(zero_area_note(int(zero.sum())))

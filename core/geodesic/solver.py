@@ -1711,6 +1711,7 @@ class GeodesicSolver:
         self.charts = []
         order = np.argsort(face_island, kind='stable')
         cuts = np.flatnonzero(np.diff(face_island[order])) + 1
+        exact_flat = method == 'auto' and grid is None and self.steiner_points is None
         for c, faces in enumerate(np.split(order, cuts)):
             Fg = self.Fs[faces]
             verts, Fl = np.unique(Fg, return_inverse=True)
@@ -1723,12 +1724,12 @@ class GeodesicSolver:
                         "for surface paths: mark seams that cut it open, or use sphere mode",
                         'no_boundary', 'mark_seams')
             else:
-                P = plane_coordinates(Vs[verts], Fl) if method == 'auto' and grid is None and \
-                    self.steiner_points is None else None
-                if P is None and method == 'auto' and grid is None and self.steiner_points is None:
-                    # no interior vertex (a hair card bent out of its plane, a strip): its isometric
-                    # unfolding is a flat domain with the same distances
-                    P = unfold_flat_disk(Vs[verts], Fl)
+                # a flat island in its plane, or with no interior vertex (a hair card bent out of its
+                # plane, a strip) in its isometric unfolding: a flat domain with the same distances
+                P = None
+                if exact_flat:
+                    P = plane_coordinates(Vs[verts], Fl)
+                    P = unfold_flat_disk(Vs[verts], Fl) if P is None else P
                 flat = planar_paths(P, Fl) if P is not None else None
                 if flat is not None:            # a flat island: exact, no grid (``PlanarChart``)
                     if report['boundary'] == 'given':

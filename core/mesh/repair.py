@@ -23,6 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
+from ..errors import ConformalError
 from . import topology
 
 
@@ -212,6 +213,13 @@ def zero_area_note(count: int) -> dict:
     return {'repair': 'zero_area_faces_mollified', 'count': int(count),
             'note': 'zero-area triangles get a valid intrinsic metric (mollification) and are left out '
                     'of the measures'}
+
+
+def require_faces(R):
+    """Raise ``ConformalError`` ('empty_mesh') if the repair ``R`` (``repair``, ``repair_merged``)
+    left no triangle: every face repeated a vertex."""
+    if len(R.F) == 0:
+        raise ConformalError("mesh has no triangle with three different vertices", 'empty_mesh')
 
 
 def oriented_faces(V, F):
