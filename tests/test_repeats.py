@@ -98,3 +98,56 @@ def test_a_symmetric_shape_is_not_matched_without_its_axes():
     V0 = V0 * [0.9 / 1.6, 1.0, 0.0]                        # flat square: equal moments in x and y
     W, G = moved_copy(V0, F0, 7)
     assert match(V0, F0, None, W, G, None) is None
+    # numbered alike (an array modifier's copy, moved) it is matched vertex for vertex
+    rng = np.random.default_rng(2)
+    Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    Q *= np.sign(np.linalg.det(Q))
+    got = match(V0, F0, None, V0 @ Q.T + 3.0, F0, None)
+    assert got is not None and (got[0] == np.arange(len(V0))).all() and not got[3]
+    assert (got[1] == np.arange(len(F0))).all() and not got[2].any()
+    # ... but not if a vertex moved, nor a curved patch mirrored with its triangles kept (their
+    # orientation reversed: not a rotation; the flat square mirrored is one, turned over)
+    bent = V0 @ Q.T
+    bent[5] += 1e-3
+    assert match(V0, F0, None, bent, F0, None) is None
+    V1, F1 = patch()
+    assert match(V1, F1, None, V1 * [-1.0, 1.0, 1.0], F1, None) is None
+
+
+def test_automatic_seams_place_the_cones_of_a_repeated_part_once():
+    """An array of one closed part (copies numbered alike, each rotated and moved) with automatic
+    seams: the first copy is placed and laid out, the others take its cones, seams and layout, which
+    are right for them (no flip, the same measures on their own triangles)."""
+    from core import unwrap as core_unwrap
+    from core.surfaces import blob
+    V0, F0 = blob(5)
+    V0 = V0 * [1.0, 0.8, 0.6]                             # an ellipsoid-like blob with distinct axes
+    rng = np.random.default_rng(4)
+    Vs, Fs = [], []
+    for k in range(3):
+        Q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+        Q *= np.sign(np.linalg.det(Q))
+        Vs.append(V0 @ Q.T + 4.0 * k)
+        Fs.append(F0 + k * len(V0))
+    V, F = np.concatenate(Vs), np.concatenate(Fs)
+    res = core_unwrap(V, F, cones='auto')
+    assert [r.get('repeat_of') for r in res.islands] == [None, 'part 1', 'part 1']
+    assert res.report['flips'] == 0 and res.report['overlaps'] == 0
+    m = len(F0)
+    corners = np.arange(3 * m).reshape(m, 3)
+    own = [uv_measures(V[F[k * m:(k + 1) * m]].reshape(-1, 3), corners,
+                       res.uv_corner[k * m:(k + 1) * m].reshape(-1, 2)) for k in range(3)]
+    assert all(o['flips'] == 0 for o in own)
+    for key in ('qc_mean', 'mu_ratio_p1_p99'):
+        assert own[1][key] == pytest.approx(own[0][key], rel=1e-9) == own[2][key]
+    cones = [sorted(v - k * len(V0) for v, _ in res.cones if k * len(V0) <= v < (k + 1) * len(V0))
+             for k in range(3)]
+    assert cones[0] == cones[1] == cones[2] and len(cones[0]) >= 3
+    # each copy's corner UVs have the same side lengths as the first's (a rigid motion of them)
+    W = res.uv_corner
+    sides = [np.linalg.norm(W[k * m:(k + 1) * m] - W[k * m:(k + 1) * m][:, [1, 2, 0]], axis=2)
+             for k in range(3)]
+    assert np.allclose(sides[1], sides[0], rtol=1e-9, atol=0) and np.allclose(sides[2], sides[0], rtol=1e-9)
+    area = [signed_uv_areas(W[k * m:(k + 1) * m].reshape(-1, 2), np.arange(3 * m).reshape(m, 3))
+            for k in range(3)]
+    assert all((a > 0).all() for a in area)

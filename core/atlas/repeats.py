@@ -10,7 +10,9 @@ units, a copy of its reports) instead of solving again. A mirror image whose tri
 way (as a mirror modifier leaves them, normals outward) has the same edge lengths with the opposite
 orientation: its conformal map is the original's reflected, with the same measures.
 
-The copy's vertices may be numbered in any order. The correspondence comes from the geometry: both
+A copy numbered like its original (an array modifier's) is recognised by the fit of one rigid motion,
+vertex by vertex, whatever its symmetry. Otherwise the copy's vertices may be numbered in any order.
+The correspondence comes from the geometry: both
 islands are put in the frame of their principal axes (the four choices of the axes' signs, then their
 four reflections), each vertex of the copy is matched to the nearest vertex of the original (position
 and the mean of its triangles' centroids, so that vertices at one point are told apart), and the match
@@ -99,6 +101,15 @@ class Shape:
         return rows[order], turn, order
 
 
+def _moved_in_order(V0, V, tol):
+    """True if the points ``V`` (n,3) are ``V0`` (n,3) moved by one rotation and translation, point by
+    point, within ``tol`` (the rotation from the best fit of the centred points, proper only)."""
+    A, B = V0 - V0.mean(0), V - V.mean(0)
+    U, _, Wt = np.linalg.svd(B.T @ A)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Wt)) or 1.0])
+    return bool(np.abs(B @ (U @ D @ Wt) - A).max() <= tol)
+
+
 def match(V0, F0, poly0, V, F, poly, tol=REPEAT_TOL):
     """``match_shape`` of the island ``V``, ``F``, ``poly`` onto the island ``V0`` (n,3), ``F0`` (m,3),
     ``poly0`` (m,) or None."""
@@ -124,6 +135,10 @@ def match_shape(shape, V, F, poly, tol=REPEAT_TOL, this=None):
     # halves have the same vertices, triangulated differently)
     if np.abs(shape.sides - this.sides).max() > 2 * tol * r0:
         return None
+    if np.array_equal(shape.F, F) and (poly is None or np.array_equal(shape.poly, poly)) and \
+            _moved_in_order(shape.V, V, tol * r0):
+        # numbered alike (an array modifier's copies): vertex i is vertex i, whatever the symmetry
+        return np.arange(len(V)), np.arange(len(F)), np.zeros(len(F), np.int64), False
     if np.diff(w0).min() <= 1e-6 * max(w0[-1], 1e-300):
         return None                                   # axes not determined: no frame to match in
     # each vertex is told apart by its position and the centroid of its triangles' centroids: vertices

@@ -43,6 +43,7 @@ from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_mesh, degenerat
                              normalise_scale)
 from .islands import boundary_crossings, seam_pairs, shelf_pack
 from .islands import unwrap as unwrap_islands
+from .repeats import Repeats
 
 MEASURE_KEYS = ('faces', 'flips', 'mu_ratio', 'mu_ratio_p1_p99', 'qc_mean', 'qc_max')
 
@@ -493,6 +494,39 @@ def _cone_part(V, F, cones, target_ratio, max_cones, progress):
         budget = max(4, min(budget // 2, r['cones'] - 1))
 
 
+def _keep_part(repeats, V, F, res, desc):
+    """Keep the ``ConeResult`` ``res`` of the part ``V`` (n,3), ``F`` (m,3) in ``repeats`` (``Repeats``)
+    as one piece whose vertices are the triangles' corners, with the cones and seams in its report."""
+    m = len(F)
+    extra = {'report': res.report, 'seams': res.seams, 'cones': res.cones, 'kappa': res.kappa, 'u': res.u,
+             'corner_vertex': F.ravel()}
+    repeats.add(V, F, None, desc, [(np.arange(m), np.arange(3 * m).reshape(m, 3), F.ravel(),
+                                    res.uv.reshape(-1, 2), extra)])
+
+
+def _repeated_part(repeats, V, F):
+    """The ``ConeResult`` of an earlier part of which the part ``V`` (n,3), ``F`` (m,3) is a copy (up to
+    a rotation and a translation, or a reflection: ``Repeats.find``), carried onto this part's vertices
+    and corners, or None. A copy has the same edge lengths, so the same cones and the same layout (a
+    mirror image's reflected); its report says which part it repeats."""
+    from .cones import ConeResult
+    same = repeats.find(V, F)
+    if same is None:
+        return None
+    desc, [(mine, Fc, new_vertex, uv, extra)] = same
+    uv_corner = np.empty((len(F), 3, 2))
+    uv_corner[mine] = uv[Fc]
+    vertex = np.empty(len(V), np.int64)              # this part's vertex of each vertex of the original
+    vertex[extra['corner_vertex']] = new_vertex
+    seams = np.sort(vertex[extra['seams']], axis=1) if len(extra['seams']) else extra['seams']
+    rep = extra['report']
+    rep['repeat_of'], rep['seconds'] = desc, {'total': 0.0}
+    u = np.empty(len(V))
+    u[vertex] = extra['u']
+    return ConeResult(uv=uv_corner, seams=seams, cones=vertex[extra['cones']], kappa=extra['kappa'], u=u,
+                      report=rep)
+
+
 def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int = 48,
                 fit: str = 'unit_square', pack: bool = True, margin: float = 0.01,
                 progress: Callable[[float, str], None] | None = None):
@@ -509,6 +543,7 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
     n_parts, part = topology.face_components(F, n)
     uv_corner = np.full((m, 3, 2), np.nan)
     islands, seams, cone_list, boxes = [], [], [], []
+    repeats = Repeats()                     # parts of one shape (an array modifier's copies) placed once
     a_total = float(face_areas(V, F).sum())
     done = 0.0
     for p in range(n_parts):
@@ -521,13 +556,15 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
             unfold_flat_disk(V[used], Fp)
         if flat is not None:                  # no interior vertex (a card, a soup's triangle): no cone
             res = flat_part(V[used], Fp, flat, target_ratio)
-        else:
+        elif (res := _repeated_part(repeats, V[used], Fp)) is None:
             try:
                 res = _cone_part(V[used], Fp, cones, target_ratio, max_cones, sub)
             except ConformalError as exc:
                 if n_parts == 1 or exc.problem.startswith('part '):
                     raise
                 raise exc.with_context(f"part {p + 1} of {n_parts} ({len(tris)} triangles)") from None
+            if n_parts > 1:
+                _keep_part(repeats, V[used], Fp, res, f"part {p + 1}")
         done += share
         r = dict(res.report)
         r.update({'island': p + 1, 'triangles': int(len(tris)),
