@@ -14,8 +14,8 @@ the closed meshes ``tests/data/sphere_<name>.npz`` (vertices as float64 of the s
 sphere mode's tests; ``geodesic_ref_suzanne_island.npz`` the largest island of tests/data/suzanne.obj
 cut along its seams, with its ``V`` and ``F``; ``geodesic_ref_scan_patch.npz`` the scan-like disk
 ``tests/meshgen.scan_patch(1500, 3)``, and ``geodesic_ref_lifted_hemisphere.npz`` the lifted hemisphere
-``tests/meshgen.steep_rim(2000, 1, 0.5, 1.0)``, each with its ``V`` and ``F`` (``--closed`` writes these
-too)."""
+``tests/meshgen.steep_rim(2000, 1, 0.5, 1.0)``, and ``geodesic_ref_bevel_box.npz`` the bevelled cube
+``tests/meshgen.bevel_box(3, 0.2)``, each with its ``V`` and ``F`` (``--closed`` writes these too)."""
 import argparse
 import os
 import sys
@@ -49,6 +49,9 @@ CLOSED = (
 SCAN_SOURCES = (37, 1328, 1334)
 # steep_rim(2000, 1, 0.5, 1.0), a lifted hemisphere: three vertices of its rim (the seed's needles)
 HEMI_SOURCES = (90, 112, 149)
+# bevel_box(3, 0.2), a coarse CAD-like part (flat faces of two triangles beside thin bevel strips):
+# a corner, a bevel vertex and a face corner (the paths at k = 9 were 0.08-0.12 % off there)
+BEVEL_SOURCES = (0, 100, 200)
 
 
 def suzanne_island():
@@ -116,11 +119,13 @@ def main(argv=None):
     _mesh_ref('suzanne_island', "suzanne's largest island", Vi, Fi, (0, len(Vi) // 2, len(Vi) - 1))
     # a scan-like disk (random points, Delaunay-triangulated and lifted; tests/meshgen.py)
     sys.path.insert(0, os.path.join(ROOT, 'tests'))
-    from meshgen import scan_patch, steep_rim
+    from meshgen import bevel_box, scan_patch, steep_rim
     _mesh_ref('scan_patch', 'scan_patch(1500, 3)', *scan_patch(1500, 3), SCAN_SOURCES)
     # a lifted hemisphere (z = sqrt(1 - r^2) over random points: needles at its vertical rim)
     _mesh_ref('lifted_hemisphere', 'steep_rim(2000, 1, 0.5, 1.0)', *steep_rim(2000, 1, 0.5, 1.0),
               HEMI_SOURCES)
+    # a bevelled cube (closed, coarse: few edges between any two points)
+    _mesh_ref('bevel_box', 'bevel_box(3, 0.2)', *bevel_box(3, 0.2), BEVEL_SOURCES)
     if args.closed:
         return 0
     return _surfaces(REFS)

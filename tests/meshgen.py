@@ -119,6 +119,21 @@ def box(n=10, size=(2.0, 1.0, 0.3)):
     return V * np.asarray(size, float), F
 
 
+def bevel_box(segments=3, radius=0.2):
+    """The unit cube with its edges and corners rounded (radius ``radius``, ``segments`` rows of quads
+    across each bevel), as Blender's Bevel modifier leaves a box: each face's middle is one flat quad
+    of two triangles beside thin bevel strips, a coarse CAD-like part. ``V`` (k,3), ``F`` (m,3),
+    outward."""
+    k = 2 * segments + 1
+    V, F = voxels(np.ones((1, 1, 1), bool), k)
+    c = np.r_[np.linspace(0.0, radius, segments + 1), np.linspace(1.0 - radius, 1.0, segments + 1)]
+    P = c[np.rint(V * k).astype(np.int64)]
+    q = np.clip(P, radius, 1.0 - radius)
+    d = P - q
+    norm = np.linalg.norm(d, axis=1)
+    return q + radius * d / np.maximum(norm, 1e-300)[:, None], F
+
+
 def voxels(filled, k=4):
     """Boundary surface of a set of unit voxels ``filled`` (nx,ny,nz) bool, each square face a k x k
     grid of cells split in two triangles, welded and outward: ``V``, ``F``."""
