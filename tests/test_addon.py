@@ -539,6 +539,35 @@ def test_auto_seams_unfold_the_default_cube_into_a_net(addon, bl):
     assert uv.min() >= -1e-6 and uv.max() <= 1 + 1e-6
 
 
+def test_auto_seams_keep_to_polygon_edges(addon, bl):
+    """A cube with a Bevel modifier applied (quads, n-gon-free rounded edges) and seams='AUTO': the
+    automatic cuts keep off the quads' diagonals, so every polygon's corners hold the map (a seam
+    through a quad gave two of its corners two UVs; Blender keeps one per loop, and such quads came
+    out folded). Every loop triangle is laid out the same way round, none squashed, no warning."""
+    from conformal_flatten.core.mesh.measures import jacobians, signed_uv_areas, singular_values
+    bpy.ops.mesh.primitive_cube_add()
+    obj = bpy.context.object
+    mod = obj.modifiers.new('bevel', 'BEVEL')
+    mod.width, mod.segments = 0.2, 3
+    bpy.ops.object.modifier_apply(modifier=mod.name)
+    me = obj.data
+    assert bpy.ops.uv.conformal_flatten(seams='AUTO', cones=0) == {'FINISHED'}
+    report = json.loads(me['conformal_flatten_report'])
+    assert report['flips'] == 0 and not report.get('warnings')
+    uv = np.zeros(2 * len(me.loops), np.float32)
+    me.uv_layers.active.uv.foreach_get('vector', uv)
+    uv = uv.reshape(-1, 2).astype(np.float64)
+    me.calc_loop_triangles()
+    lt = np.array([t.loops[:] for t in me.loop_triangles])
+    vt = np.array([t.vertices[:] for t in me.loop_triangles])
+    co = np.array([v.co[:] for v in me.vertices], np.float64)
+    a = signed_uv_areas(uv, lt)
+    assert (a > 0).all() or (a < 0).all()
+    J, _ = jacobians(co[vt].reshape(-1, 3), np.arange(lt.size).reshape(-1, 3), uv[lt.ravel()])
+    sv = singular_values(J)
+    assert (sv[:, 0] / sv[:, 1]).max() < 2.0
+
+
 def test_auto_seams_unwrap_a_closed_mesh(addon, bl):
     """seams='AUTO' unwraps a closed mesh in one click: the chosen seams are marked on the mesh, the
     cones baked, every corner gets a UV in [0,1] with no flipped triangle; re-running with

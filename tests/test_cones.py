@@ -973,3 +973,52 @@ def test_automatic_seams_name_a_part_with_no_area():
     with pytest.raises(ConformalError) as err:
         unwrap(V, np.array([[0, 0, 1], [3, 4, 4]]), cones='auto')
     assert err.value.code == 'empty_mesh'
+
+
+def _bevel_box_polygons(segments=3, radius=0.2):
+    """``tests/meshgen.bevel_box`` with the polygon of each triangle: (V, F, tri_poly (m,)), each quad
+    of its faces' grids cut into two triangles along a diagonal."""
+    from meshgen import bevel_box
+    V, F = bevel_box(segments, radius)
+    k = 2 * segments + 1
+    t = np.arange(len(F))
+    return V, F, t // (2 * k * k) * k * k + t % (2 * k * k) % (k * k)
+
+
+def test_automatic_seams_keep_off_the_polygons_diagonals():
+    """A seam through a quad's diagonal gives two of its corners two UVs each, which a polygon (one UV
+    per corner, as in Blender and OBJ) cannot hold: written per corner, the bevelled box's automatic
+    seams left 4 flipped triangles and an s1/s2 of 143. With the polygons given (``tri_poly``) the
+    cuts keep to polygon edges: no polygon is split, and the UVs per polygon corner are the map's,
+    with the same cones and ratio."""
+    from core import unwrap
+    from core.atlas.unwrap import split_polygons
+    from core.mesh.measures import uv_measures
+    V, F, poly = _bevel_box_polygons()
+    plain = unwrap(V, F, cones='auto')
+    assert split_polygons(F, poly, plain.uv_corner) > 0           # triangles alone: cuts through quads
+    res = unwrap(V, F, cones='auto', tri_poly=poly)
+    assert res.report['split_polygons'] == 0 and not res.warnings
+    assert res.report['cones'] == plain.report['cones']
+    assert abs(res.report['mu_ratio_p1_p99'] - plain.report['mu_ratio_p1_p99']) < 0.01
+    # one UV per polygon corner (the last triangle's, as a polygon's loop holds it): the same map
+    key = np.repeat(poly, 3) * len(V) + F.ravel()
+    last = {k: i for i, k in enumerate(key.tolist())}
+    W = res.uv_corner.reshape(-1, 2)[[last[k] for k in key.tolist()]]
+    assert np.array_equal(W, res.uv_corner.reshape(-1, 2))
+    m = uv_measures(V[F].reshape(-1, 3), np.arange(3 * len(F)).reshape(-1, 3), W)
+    assert m['flips'] == 0 and m['qc_max'] < 2.0
+
+
+def test_a_seam_through_polygons_is_warned():
+    """Seams given along quads' diagonals (a zigzag no polygon edge follows) cut polygons in two:
+    their corners cannot hold the two UVs, so the result says how many, in a warning."""
+    from core import unwrap
+    n = 5
+    V, F = make_surface('flat', n)
+    poly = np.arange(len(F)) % ((n - 1) ** 2)                       # triangles t and t + 16: one quad
+    diag = np.array([[i * (n + 1), (i + 1) * (n + 1)] for i in range(n - 1)])  # the quads' diagonals
+    res = unwrap(V, F, seams=diag, tri_poly=poly)
+    assert res.report['islands'] == 2 and res.report['split_polygons'] == n - 1
+    assert any(f"{n - 1} polygon(s) are cut by a seam" in w for w in res.warnings)
+    assert unwrap(V, F, tri_poly=poly).report['split_polygons'] == 0

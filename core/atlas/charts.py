@@ -8,7 +8,7 @@ import numpy as np
 from ..mesh import topology
 from ..mesh.geometry import weighted_graph
 from .cut import boundary_crossings, cut_along_seams, shelf_pack
-from .cutgraph import is_disk
+from .cutgraph import inner_mask, is_disk
 
 MAX_SPLITS = 30                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
                                    # (then glued back where the pieces do not overlap: ``merge_charts``;
@@ -49,11 +49,12 @@ def _piece_crossings(Fc, uvc, face_island, n_islands, segments=False, twin=None)
     return out
 
 
-def _interior_path(V, vert_of, E, onb, p, q, N, lp=None):
+def _interior_path(V, vert_of, E, onb, p, q, N, lp=None, inner=None):
     """Shortest path (list of split vertices) from ``p`` to ``q`` over the edges ``E`` (k,2) with their
     3D lengths, or None. Edges touching a boundary vertex (``onb`` (N,) bool) other than ``p`` and
     ``q`` cost ten times their length (such a path splits a piece into more than two, which is
-    allowed), and the boundary edges of ``lp`` (the loop) are never used."""
+    allowed), the boundary edges of ``lp`` (the loop) are never used, and an edge whose mesh
+    vertices are a pair of ``inner`` (k,2: a polygon's diagonal) costs the total length on top."""
     from scipy.sparse.csgraph import dijkstra
     if p == q:
         return None
@@ -66,6 +67,9 @@ def _interior_path(V, vert_of, E, onb, p, q, N, lp=None):
     w = np.maximum(np.linalg.norm(V[vert_of[E[:, 0]]] - V[vert_of[E[:, 1]]], axis=1), 1e-300)
     touch = (onb[E[:, 0]] & ~end[E[:, 0]]) | (onb[E[:, 1]] & ~end[E[:, 1]])
     w = np.where(touch, 10 * w, w)
+    on = inner_mask(np.sort(vert_of[E], 1), inner, len(V))
+    if on.any():
+        w = w + on * (w.sum() + 1.0)
     G = weighted_graph(E, w, N)
     dist, pred = dijkstra(G, directed=False, indices=p, return_predecessors=True)
     if not np.isfinite(dist[q]):
@@ -89,7 +93,7 @@ def _crossing_pairs(uv, seg):
     return [(seg[i], seg[j]) for i, j in zip(a[x], b[x])]
 
 
-def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS, twin=None):
+def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS, twin=None, inner=None):
     """Split an overlapping layout into charts (docs/cones.md, "Charts"). The layout of the cut disk
     is one flat metric, so any piece of it is laid out by the same coordinates: a piece whose boundary
     crosses itself is cut in two along the shortest interior path between the middles of the two
@@ -97,7 +101,8 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS, twin=None):
     different pieces; repeated up to ``max_splits`` times. The pieces are then moved apart (shelf
     packing). ``V`` (n,3), ``F`` (m,3) the working mesh; ``cut`` (``islands.Cut``) and ``uvc`` (N,2)
     its cut disk and layout; ``seams`` (k,2); ``twin`` (3m,) optional: ``F``'s half-edge twins
-    (``topology.twin_halfedges``). Returns (cut, uvc, seams, crossings left, splits)."""
+    (``topology.twin_halfedges``); ``inner`` (k,2): polygons' diagonals, which the splitting paths avoid
+    where they can. Returns (cut, uvc, seams, crossings left, splits)."""
     n = len(V)
     if twin is None:
         twin = topology.twin_halfedges(F, n)
@@ -125,14 +130,19 @@ def split_overlaps(V, F, cut, uvc, seams, max_splits=MAX_SPLITS, twin=None):
                 E0, _ = topology.unique_edges(Fi)
                 onb = np.zeros(len(uvc), bool)
                 onb[lp] = True
-                path = None
+                path = first = None
                 arc1, arc2 = (b - a) % nl, (a - b) % nl
                 for f1, f2 in ((2, 2), (1, 2), (3, 2), (2, 1), (2, 3), (1, 1), (3, 3)):
                     p = int(lp[(a + arc1 * f1 // 4) % nl])
                     q = int(lp[(b + arc2 * f2 // 4) % nl])
-                    path = _interior_path(V, cut.vert_of, E0, onb, p, q, len(uvc), lp)
-                    if path is not None:
-                        break
+                    path = _interior_path(V, cut.vert_of, E0, onb, p, q, len(uvc), lp, inner)
+                    if path is None:
+                        continue
+                    pv = np.sort(np.stack([cut.vert_of[path[:-1]], cut.vert_of[path[1:]]], 1), 1)
+                    if not inner_mask(pv, inner, n).any():
+                        break                     # (a path through a polygon: the next pair first)
+                    first, path = first or path, None
+                path = path or first
                 if path is None:
                     continue
                 pv = cut.vert_of[np.array(path)]

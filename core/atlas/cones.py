@@ -1608,9 +1608,11 @@ def _untangle_layout(Fc, uv, vert_of, seams, n, info):
     info['untangled'] = untangle(Fc, uv, on[vert_of])
 
 
-def _wedge_middle(Vc, Fc, loop, corner):
+def _wedge_middle(Vc, Fc, loop, corner, avoid=None):
     """The neighbour of boundary vertex ``corner`` of the cut disk that halves its wedge by angle
-    (walking the fan of triangles from the next boundary vertex to the previous one)."""
+    (walking the fan of triangles from the next boundary vertex to the previous one); ``avoid`` (N,)
+    bool optional: neighbours not taken while another is inside the wedge (across a polygon's
+    diagonal)."""
     from ..mesh.geometry import corner_angles
     tris = np.nonzero((Fc == corner).any(1))[0]
     ang = corner_angles(Vc, Fc[tris])
@@ -1626,11 +1628,13 @@ def _wedge_middle(Vc, Fc, loop, corner):
         seq.append((v, total))
     half = total / 2
     inner = [(abs(t - half), v) for v, t in seq[:-1]]
+    if avoid is not None and any(not avoid[v] for _, v in inner):
+        inner = [(d, v) for d, v in inner if not avoid[v]]
     return min(inner)[1] if inner else None
 
 
 def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=None, exact=True,
-               fac0=None):
+               fac0=None, inner=None):
     """Cut ``(V, F)`` along ``seams`` (k,2) and lay the disk out for the cone curvatures ``kappa`` (c,)
     at ``cones`` (c,), with the closed-surface linear log scale ``u`` (n,) (``Lu``: its ``L u``).
 
@@ -1639,7 +1643,8 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
     harmonically). A cone whose wedge exceeds ``WEDGE_MAX`` (a negative cone at a leaf of the cut, or
     one split unevenly; the exact metric's wedge when there is one, else the linear estimate) gets a
     new branch of the cut through the middle of that wedge (``through_corner``, else
-    ``reroute_leaf``), at most ``max_branches`` times.
+    ``reroute_leaf``), at most ``max_branches`` times; the branches avoid the edges ``inner`` (k,2:
+    polygons' diagonals) where they can.
     Returns (cut (``islands.Cut``), loop (nb,), uv (N,2) per split vertex, seams (k',2), info dict)."""
     n = len(V)
     seams = np.asarray(seams, np.int64).reshape(-1, 2)
@@ -1692,7 +1697,13 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
             break
         cc = int(loop[bad[np.argmax(wedge[bad])]])
         c = int(vert_of[cc])
-        w0 = _wedge_middle(Vc, Fc, loop, cc)
+        avoid = None
+        if inner is not None and len(inner):
+            # the corner's neighbours across a polygon's diagonal (a branch along it would split
+            # the polygon)
+            across = np.asarray(inner)[(np.asarray(inner) == c).any(1)].ravel()
+            avoid = np.isin(vert_of, across[across != c])
+        w0 = _wedge_middle(Vc, Fc, loop, cc, avoid)
         if w0 is None:
             failed.add(c)
             continue
@@ -1704,21 +1715,21 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
             stop[lp] = True
         protect = np.zeros(n, bool)
         protect[np.asarray(cones, np.int64)[np.asarray(kappa) < 0]] = True
-        new = through_corner(V, F, seams, c, int(vert_of[w0]), stop, protect)
+        new = through_corner(V, F, seams, c, int(vert_of[w0]), stop, protect, inner)
         c2 = None
         if new is not None:
             c2 = cut_along_seams(F, n, new, twin=twin)
             if c2.n_islands != 1 or not is_disk(c2.F, len(c2.vert_of), twin=_cut_twins(c2.F, twin)):
                 new, c2 = None, None
         if new is None:
-            new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect)
+            new = reroute_leaf(V, F, seams, c, int(vert_of[w0]), pos[pos != c], stop, protect, inner)
         if new is None:
             failed.add(c)                    # try the next corner; this one keeps its wedge
             continue
         # the straightened branch, else the branch as found, whichever still opens the surface into a
         # disk (straightening can make a path touch the boundary or the cut elsewhere: teapot's lid)
         reuse = None
-        for cand in (straighten(F, new, stop), new):
+        for cand in (straighten(F, new, stop, inner), new):
             cand = np.unique(np.sort(np.asarray(cand, np.int64).reshape(-1, 2), 1), axis=0)
             c3 = c2 if c2 is not None and np.array_equal(np.unique(np.sort(new, 1), axis=0), cand) \
                 else cut_along_seams(F, n, cand, twin=twin)
@@ -1766,21 +1777,22 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
 # ------------------------------------------------------------------------------------------------
 # the public entry point
 # ------------------------------------------------------------------------------------------------
-def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True, u=None):
+def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True, u=None, inner=None):
     """Lay out and measure one set of cone angles on the cut ``seams``: dict with cut, loop, uv (N,2)
     per split vertex (UV area = 3D area), seams, info, measured (``measures_from_jacobians``),
     crossings (boundary self-crossings) and u (n,). ``u`` (n,): the angles' linear log scale
-    (``system.u_of(S, kappa)``) if the caller has it already."""
+    (``system.u_of(S, kappa)``) if the caller has it already. ``inner`` (k,2): polygons' diagonals,
+    which new cuts avoid where they can."""
     u = system.u_of(S, kappa) if u is None else u
     u = u - np.median(u)
     cut, loop, uvc, seams, info = layout_cut(Vw, Fw, u, seams, S, kappa, cache=cache,
                                              max_branches=16 if len(Vw) <= BIG_MESH else 4,
-                                             Lu=system.L @ u, fac0=system._fac)
+                                             Lu=system.L @ u, fac0=system._fac, inner=inner)
     crossings = boundary_crossings(uvc, [loop])
     splits = 0
     if crossings and split:
         cut, uvc, seams, crossings, splits = split_overlaps(Vw, Fw, cut, uvc, seams,
-                                                            twin=_mesh_twins(Fw, len(Vw), cache))
+                                                            twin=_mesh_twins(Fw, len(Vw), cache), inner=inner)
     info['charts'], info['splits'] = int(cut.n_islands), splits
     Fc = cut.F
     W = uvc[Fc]
@@ -1831,7 +1843,7 @@ def _split_nonmanifold(V, F):
 
 
 def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE_SWEEPS,
-                max_faces=DEFAULT_MAX_FACES, progress=None):
+                max_faces=DEFAULT_MAX_FACES, progress=None, inner=None):
     """Conformal UVs with cone singularities and an automatic cut (docs/cones.md).
 
     V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise; one connected manifold piece,
@@ -1841,6 +1853,9 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
     radians (closed: they must sum to 2*pi*chi). target_ratio: stop adding cones when the estimated
     1%/99% spread of the scale reaches it (None: place exactly ``max_cones``). sweeps: passes of
     local cone moves after the greedy placement. progress: optional ``progress(fraction, message)``.
+    inner: optional (m,3) bool, side ``s`` of triangle ``t`` (corners ``s`` and ``s + 1``) lies inside
+    a polygon (a quad's diagonal): the cut avoids those edges where it can, since a seam through a
+    polygon would give one of its corners two UVs.
     Returns ``ConeResult``. Raises ``ConformalError`` on bad input."""
     report_progress = progress or (lambda f, msg: None)
     t0 = time.perf_counter()
@@ -1864,6 +1879,11 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
     newid[keep] = np.arange(keep.sum())
     Fw = newid[Fs]
     orig = vert_of0[keep]                     # input vertex of each working vertex
+    inner_w = None
+    if inner is not None:
+        inner = np.asarray(inner, bool).reshape(m, 3)
+        t, c = np.nonzero(inner)
+        inner_w = np.unique(np.sort(np.stack([Fw[t, c], Fw[t, (c + 1) % 3]], 1), 1), axis=0)
     Vw, unit = normalise_scale(Vs[keep])
     n = len(Vw)
     if degenerate_faces(Vw, Fw).all():
@@ -1909,7 +1929,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         layout with defects as [ratio, evaluation] or [])."""
         report_progress(0.7, 'cutting')
         t = time.perf_counter()
-        seams0 = cut_graph(Vw, Fw, S)
+        seams0 = cut_graph(Vw, Fw, S, inner=inner_w)
         timings['cut'] = timings.get('cut', 0.0) + time.perf_counter() - t
         report_progress(0.75, 'laying out the cut disk')
         t = time.perf_counter()
@@ -2009,7 +2029,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
                 continue
             budget[0] += 1
             try:
-                ev = _evaluate(Vw, Fw, system, S, kap, seams0, cache, u=u_lin)
+                ev = _evaluate(Vw, Fw, system, S, kap, seams0, cache, u=u_lin, inner=inner_w)
             except ConformalError as exc:
                 tried.append({'angles': label, 'error': exc.problem})
                 continue

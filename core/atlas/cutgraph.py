@@ -23,12 +23,27 @@ from ..mesh import topology
 from ..mesh.geometry import weighted_graph
 
 
-def edge_list(V, F):
-    """Undirected edges ``E`` (e,2) (E[:,0] < E[:,1]), their lengths (e,), and the (n,n) CSR graph
-    whose entry (i,j) is the index of edge ij plus one."""
+def inner_mask(E, inner, n):
+    """(e,) bool: the edges ``E`` (e,2) (sorted pairs) that are among ``inner`` (k,2) vertex pairs (the
+    diagonals of polygons cut into triangles), over ``n`` vertices; all False for None."""
+    if inner is None or not len(inner):
+        return np.zeros(len(E), bool)
+    inner = np.sort(np.asarray(inner, np.int64).reshape(-1, 2), 1)
+    return np.isin(E[:, 0] * n + E[:, 1], inner[:, 0] * n + inner[:, 1])
+
+
+def edge_list(V, F, inner=None):
+    """Undirected edges ``E`` (e,2) (E[:,0] < E[:,1]), their weights (e,), and the (n,n) CSR graph
+    whose entry (i,j) is the index of edge ij plus one. The weight is the edge's length; an edge of
+    ``inner`` (k,2) vertex pairs (a polygon's diagonal, ``cone_unwrap``'s ``inner``) costs the total
+    length on top, so a path takes one only where no other way exists (a seam through a polygon
+    gives it two UVs at one corner, which a polygon cannot hold)."""
     n = len(V)
     E, _ = topology.unique_edges(F)
     w = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    on = inner_mask(E, inner, n)
+    if on.any():
+        w = w + on * (w.sum() + 1.0)
     idx = np.arange(1, len(E) + 1)
     Gi = sp.coo_matrix((np.r_[idx, idx], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
                        shape=(n, n)).tocsr()
@@ -44,7 +59,7 @@ def _path_edges(pred, v):
     return out
 
 
-def homology_loops(V, F, root=None):
+def homology_loops(V, F, root=None, inner=None):
     """Edges (k,2) of 2g loops through ``root`` that cut every handle of a closed or bounded surface
     (empty for genus 0). A surface with boundary is capped first (a virtual vertex per boundary loop);
     loop pieces through a cap are dropped, which leaves paths between boundary points: together with
@@ -67,7 +82,7 @@ def homology_loops(V, F, root=None):
     genus = (2 - chi) // 2
     if genus <= 0:
         return np.zeros((0, 2), np.int64)
-    E, w, Gi = edge_list(Vc, Fc)
+    E, w, Gi = edge_list(Vc, Fc, inner)
     if loops:
         w = np.where((E >= n).any(1), w.max() * 10 + 1, w)       # keep caps off the short loops
     if root is None:
@@ -110,7 +125,7 @@ def homology_loops(V, F, root=None):
     return out
 
 
-def steiner_tree(V, F, groups):
+def steiner_tree(V, F, groups, inner=None):
     """A short tree of mesh edges (k,2) joining vertex ``groups`` (list of (k_i,) int arrays; each
     group is one terminal: a cone is a group of one vertex, a boundary loop or a loop system a group
     of many). Mehlhorn's approximation: Voronoi regions of the terminals by one multi-source Dijkstra,
@@ -119,7 +134,7 @@ def steiner_tree(V, F, groups):
     if len(groups) <= 1:
         return np.zeros((0, 2), np.int64)
     n = len(V)
-    E, w, _ = edge_list(V, F)
+    E, w, _ = edge_list(V, F, inner)
     label = -np.ones(n, np.int64)
     for i, g in enumerate(groups):
         label[g] = i
@@ -165,33 +180,36 @@ def prune(edges, keep, n):
         alive &= ~drop
 
 
-def cut_graph(V, F, cones, root=None):
+def cut_graph(V, F, cones, root=None, inner=None):
     """Seam edges (k,2) that cut the manifold, connected surface ``(V, F)`` into a disk whose boundary
     passes through every vertex of ``cones`` (c,) int: 2g homology loops, a short tree joining the
     cones, the boundary loops and the loops, pruned of dangling ends. A closed genus-0 surface with
-    fewer than two cones gets a one-edge cut at its cone (or vertex 0) so that it still opens."""
+    fewer than two cones gets a one-edge cut at its cone (or vertex 0) so that it still opens.
+    ``inner`` (k,2): vertex pairs the cut avoids where it can (polygons' diagonals, ``edge_list``)."""
     F = np.asarray(F, np.int64)
     n = len(V)
     cones = np.unique(np.asarray(cones, np.int64))
     loops = topology.boundary_loops(F, n)
     if root is None:
         root = int(cones[0]) if len(cones) else (int(loops[0][0]) if loops else 0)
-    H = homology_loops(V, F, root)
+    H = homology_loops(V, F, root, inner)
     groups = [np.array([c]) for c in cones.tolist()] + list(loops)
     if len(H):
         groups.append(np.unique(H))
-    T = steiner_tree(V, F, groups)
+    T = steiner_tree(V, F, groups, inner)
     keep = np.zeros(n, bool)
     keep[cones] = True
     for lp in loops:
         keep[lp] = True
-    cut = straighten(F, prune(np.vstack([H, T]), keep, n), keep)
+    cut = straighten(F, prune(np.vstack([H, T]), keep, n), keep, inner)
     if len(cut) == 0 and not loops:
         # genus 0, closed, at most one cone: slit one edge at the cone so that the surface opens
         v = int(cones[0]) if len(cones) else 0
         nb = F[(F == v).any(1)].ravel()
         nb = nb[nb != v]
-        cut = np.array([[min(v, nb[0]), max(v, nb[0])]], np.int64)
+        pairs = np.sort(np.stack([np.full(len(nb), v), nb], 1), 1)
+        off = ~inner_mask(pairs, inner, n)
+        cut = pairs[[int(np.argmax(off))]]
     return cut
 
 
@@ -240,16 +258,16 @@ def twig(edges, start, stop):
             return path
 
 
-def reroute_leaf(V, F, edges, corner, start, leaves, stop, protect=None):
+def reroute_leaf(V, F, edges, corner, start, leaves, stop, protect=None, inner=None):
     """Make the cut graph pass *through* vertex ``corner`` (so that its angle is split in two) by
     moving the twig of one leaf: ``start`` is a vertex next to ``corner``, inside the wedge to split;
     ``leaves`` candidate leaf vertices (positive cones); ``stop`` (n,) bool ends of twigs. The twig of
     the nearest leaf reachable from ``start`` without touching the rest of the cut is removed, and
     the path leaf - ... - start - corner added, so the cut stays a tree. ``protect`` (n,) bool: vertices
     (negative cones) that must keep two cut edges: a twig ending at one of degree 2 is not moved.
-    Returns the new edges (k,2), or None if no leaf is reachable."""
+    ``inner``: as ``cut_graph``'s. Returns the new edges (k,2), or None if no leaf is reachable."""
     n = len(V)
-    E, w, _ = edge_list(V, F)
+    E, w, _ = edge_list(V, F, inner)
     on_cut = np.zeros(n, bool)
     on_cut[edges.ravel()] = True
     twigs = {int(d): twig(edges, int(d), stop) for d in leaves}
@@ -279,11 +297,12 @@ def reroute_leaf(V, F, edges, corner, start, leaves, stop, protect=None):
     return None
 
 
-def straighten(F, edges, keep):
+def straighten(F, edges, keep, inner=None):
     """Remove spikes of the cut: where a path a - v - b turns back along a triangle (a, v, b) at a
     vertex v of degree 2 that is not in ``keep`` ((n,) bool), the edge a - b replaces it. Such a turn
     leaves v one wedge of a single corner and the other of nearly 2*pi, which a linearised layout
-    overlaps. The cut stays a tree with the same terminals. Returns edges (k,2)."""
+    overlaps. The cut stays a tree with the same terminals; an edge a - b of ``inner`` (k,2: a
+    polygon's diagonal) is not taken. Returns edges (k,2)."""
     F = np.asarray(F, np.int64)
     edges = np.asarray(edges, np.int64).reshape(-1, 2)
     on = np.zeros(max(int(F.max()), int(edges.max()) if len(edges) else 0) + 1, bool)
@@ -291,6 +310,8 @@ def straighten(F, edges, keep):
     near = F[on[F].sum(1) >= 2]                      # only triangles with two cut vertices matter
     tri = set(map(tuple, np.sort(near, axis=1).tolist()))
     E = {tuple(e) for e in np.sort(edges, 1).tolist()}
+    skip = set() if inner is None else {tuple(e) for e in np.sort(np.asarray(inner, np.int64).reshape(-1, 2),
+                                                                   1).tolist()}
     changed = True
     while changed:
         changed = False
@@ -303,7 +324,7 @@ def straighten(F, edges, keep):
                 continue
             a, b = nb
             ab = (min(a, b), max(a, b))
-            if ab in E or tuple(sorted((a, b, v))) not in tri:
+            if ab in E or ab in skip or tuple(sorted((a, b, v))) not in tri:
                 continue
             if (min(a, v), max(a, v)) not in E or (min(b, v), max(b, v)) not in E:
                 continue                                    # v changed in this round already
@@ -314,7 +335,7 @@ def straighten(F, edges, keep):
     return np.array(sorted(E), np.int64).reshape(-1, 2)
 
 
-def through_corner(V, F, edges, corner, start, stop, protect=None):
+def through_corner(V, F, edges, corner, start, stop, protect=None, inner=None):
     """Make the cut graph ``edges`` (k,2) pass *through* the leaf ``corner`` (a negative cone whose
     single wedge exceeds 2*pi) by a new branch, keeping a tree of the same topology.
 
@@ -326,10 +347,10 @@ def through_corner(V, F, edges, corner, start, stop, protect=None):
     boundary) or branch points, except the segments that end at ``corner`` and those ending at a
     ``protect`` vertex ((n,) bool: negative cones) of degree 2, and dangling ends are pruned (``keep``
     = ``stop``). Returns the new edges (k',2), or None if no such branch exists. The caller checks that
-    the surface still opens into a disk (``is_disk``)."""
+    the surface still opens into a disk (``is_disk``). ``inner``: as ``cut_graph``'s."""
     n = len(V)
     edges = np.unique(np.sort(np.asarray(edges, np.int64).reshape(-1, 2), 1), axis=0)
-    E, w, _ = edge_list(V, F)
+    E, w, _ = edge_list(V, F, inner)
     on_cut = np.zeros(n, bool)
     on_cut[edges.ravel()] = True
     if on_cut[start]:

@@ -247,7 +247,8 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
             fixed.repairs.append(zero_area_note(int(zero.sum())))
         uv_r, isl_r, islands, seams_r, cone_r = cone_layout(
             fixed.V, fixed.F, cones=cones, target_ratio=target_ratio, max_cones=max_cones, fit=fit,
-            pack=pack, margin=margin, progress=progress)
+            pack=pack, margin=margin, progress=progress,
+            poly=None if tri_poly is None else tri_poly[sel][fixed.face_map])
         uv_corner_s = np.full((len(Fs), 3, 2), np.nan)
         uv_corner_s[fixed.face_map] = np.where(fixed.flipped[:, None, None], uv_r[:, [0, 2, 1]], uv_r)
         rest, kept = fixed.dropped, fixed.face_map
@@ -337,6 +338,11 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         warnings.append(f"{mirrored} triangle(s) are wound against their neighbours (their normals point "
                         "the other way): their UVs are mirrored; recalculate normals")
     dup = topology.split_duplicates(Vs, Fs) if len(islands) > 1 else 0
+    split = 0 if tri_poly is None else split_polygons(F, tri_poly, uv_corner)
+    if split:
+        warnings.append(f"{split} polygon(s) are cut by a seam through their inside: a polygon holds one UV "
+                        "per corner, so theirs are wrong; triangulate them (Face > Triangulate Faces) or "
+                        "mark seams along polygon edges")
     if dup > SOUP_FRACTION * len(np.unique(Fs)):       # parts that touch (a teapot's lid) are not a soup
         warnings.append(f"{dup} vertices sit on a vertex of another part (the surface is split there "
                         "without a seam, as in a triangle soup): merge vertices by distance (Mesh > Clean "
@@ -347,6 +353,7 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
                     'vertices': int(len(V)), 'selected_triangles': int(len(sel)),
                     'flattened_triangles': int(flattened.sum()), 'seams': int(len(Ss)),
                     'overlaps': int(sum(r.get('overlaps', 0) for r in islands if 'error' not in r)),
+                    'split_polygons': int(split),
                     'qc_mean_worst': float(max(r['qc_mean'] for r in islands if 'error' not in r)),
                     'mu_ratio_worst': float(min(r['mu_ratio'] for r in islands if 'error' not in r)),
                     'seconds': round(time.perf_counter() - t0, 4),
@@ -457,12 +464,13 @@ def true_scale(parts: Sequence[tuple]) -> list:
     return [W * s for W in out]
 
 
-def _cone_part(V, F, cones, target_ratio, max_cones, progress):
+def _cone_part(V, F, cones, target_ratio, max_cones, progress, inner=None):
     """One connected part through ``cone_unwrap``: the automatic budget (``cones`` 'auto') keeps the
     best defect-free layout among ``max_cones`` and smaller budgets, since a layout that folds or
     overlaps is worth less than one with fewer cones. A budget whose cones give no layout at all (a
     coarse part: 'solve_failed') is lowered until one does (halved above 8, then one at a time), with
-    a warning; the first error is raised if none does. Returns ``ConeResult``."""
+    a warning; the first error is raised if none does. ``inner``: ``cone_unwrap``'s. Returns
+    ``ConeResult``."""
     from .cones import cone_unwrap, realised_spread
     auto = cones == 'auto'
     budget = int(max_cones) if auto else int(cones)
@@ -470,7 +478,7 @@ def _cone_part(V, F, cones, target_ratio, max_cones, progress):
     while True:
         try:
             res = cone_unwrap(V, F, cones=None, target_ratio=target_ratio if auto else None, max_cones=budget,
-                              progress=progress)
+                              progress=progress, inner=inner)
         except ConformalError as exc:
             if exc.code != 'solve_failed' or budget <= 1:
                 if best is not None:
@@ -494,23 +502,51 @@ def _cone_part(V, F, cones, target_ratio, max_cones, progress):
         budget = max(4, min(budget // 2, r['cones'] - 1))
 
 
-def _keep_part(repeats, V, F, res, desc):
-    """Keep the ``ConeResult`` ``res`` of the part ``V`` (n,3), ``F`` (m,3) in ``repeats`` (``Repeats``)
-    as one piece whose vertices are the triangles' corners, with the cones and seams in its report."""
+def split_polygons(F, tri_poly, uv_corner):
+    """How many polygons (``tri_poly`` (m,) the polygon of each triangle of ``F`` (m,3)) give one of
+    their vertices two different UVs in ``uv_corner`` (m,3,2) (NaN: a triangle not flattened, left
+    out): a seam through the polygon's inside, which a polygon's corners cannot hold."""
+    ok = np.isfinite(uv_corner).all(axis=(1, 2))
+    if not ok.any():
+        return 0
+    Fk, pk = F[ok], np.asarray(tri_poly)[ok]
+    key = np.stack([np.repeat(pk, 3), Fk.ravel()], 1)
+    W = uv_corner[ok].reshape(-1, 2)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    key, W = key[order], W[order]
+    same = (key[1:] == key[:-1]).all(1)
+    differ = same & (W[1:] != W[:-1]).any(1)
+    return int(len(np.unique(key[1:][differ, 0])))
+
+
+def polygon_sides(F, n, poly):
+    """(m,3) bool: side ``s`` of triangle ``t`` of ``F`` (m,3) (corners ``s`` and ``s + 1``, over ``n``
+    vertices) lies inside a polygon: the triangle across it has the same ``poly`` (m,) id (a quad's
+    diagonal, an n-gon's fan)."""
+    tw = topology.twin_halfedges(F, n).reshape(-1, 3)
+    across = np.where(tw >= 0, tw // 3, 0)
+    return (tw >= 0) & (poly[across] == poly[:, None])
+
+
+def _keep_part(repeats, V, F, poly, res, desc):
+    """Keep the ``ConeResult`` ``res`` of the part ``V`` (n,3), ``F`` (m,3) with polygons ``poly`` (m,)
+    or None in ``repeats`` (``Repeats``) as one piece whose vertices are the triangles' corners, with
+    the cones and seams in its report."""
     m = len(F)
     extra = {'report': res.report, 'seams': res.seams, 'cones': res.cones, 'kappa': res.kappa, 'u': res.u,
              'corner_vertex': F.ravel()}
-    repeats.add(V, F, None, desc, [(np.arange(m), np.arange(3 * m).reshape(m, 3), F.ravel(),
+    repeats.add(V, F, poly, desc, [(np.arange(m), np.arange(3 * m).reshape(m, 3), F.ravel(),
                                     res.uv.reshape(-1, 2), extra)])
 
 
-def _repeated_part(repeats, V, F):
-    """The ``ConeResult`` of an earlier part of which the part ``V`` (n,3), ``F`` (m,3) is a copy (up to
+def _repeated_part(repeats, V, F, poly):
+    """The ``ConeResult`` of an earlier part of which the part ``V`` (n,3), ``F`` (m,3), ``poly`` (m,) or
+    None is a copy (up to
     a rotation and a translation, or a reflection: ``Repeats.find``), carried onto this part's vertices
     and corners, or None. A copy has the same edge lengths, so the same cones and the same layout (a
     mirror image's reflected); its report says which part it repeats."""
     from .cones import ConeResult
-    same = repeats.find(V, F)
+    same = repeats.find(V, F, poly)
     if same is None:
         return None
     desc, [(mine, Fc, new_vertex, uv, extra)] = same
@@ -529,13 +565,15 @@ def _repeated_part(repeats, V, F):
 
 def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int = 48,
                 fit: str = 'unit_square', pack: bool = True, margin: float = 0.01,
-                progress: Callable[[float, str], None] | None = None):
+                progress: Callable[[float, str], None] | None = None, poly=None):
     """Automatic seams from cone singularities, part by part (docs/math.md §9).
 
     ``V`` (n,3), ``F`` (m,3): a manifold mesh (one or several connected parts, closed or open, any
     genus). cones: 'auto' (the fewest cones reaching ``target_ratio`` for the 1%/99% scale ratio, at
-    most ``max_cones``) or a cone budget per part (int). Returns (uv_corner (m,3,2), face_island (m,),
-    islands (list of report dicts), seams (k,2), cones (list of (vertex, kappa)))."""
+    most ``max_cones``) or a cone budget per part (int). ``poly`` (m,) optional: the polygon of each
+    triangle; the cuts keep off the polygons' diagonals where they can (a seam through a polygon
+    would give one of its corners two UVs). Returns (uv_corner (m,3,2), face_island (m,), islands
+    (list of report dicts), seams (k,2), cones (list of (vertex, kappa)))."""
     from .cones import flat_part
     from .unfold import FLAT_TREE_MAX, unfold_flat_disk
     report_progress = progress or (lambda f, msg: None)
@@ -544,6 +582,7 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
     uv_corner = np.full((m, 3, 2), np.nan)
     islands, seams, cone_list, boxes = [], [], [], []
     repeats = Repeats()                     # parts of one shape (an array modifier's copies) placed once
+    inner = None if poly is None else polygon_sides(F, n, np.asarray(poly))
     a_total = float(face_areas(V, F).sum())
     done = 0.0
     for p in range(n_parts):
@@ -556,15 +595,16 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
             unfold_flat_disk(V[used], Fp)
         if flat is not None:                  # no interior vertex (a card, a soup's triangle): no cone
             res = flat_part(V[used], Fp, flat, target_ratio)
-        elif (res := _repeated_part(repeats, V[used], Fp)) is None:
+        elif (res := _repeated_part(repeats, V[used], Fp, None if inner is None else poly[tris])) is None:
             try:
-                res = _cone_part(V[used], Fp, cones, target_ratio, max_cones, sub)
+                res = _cone_part(V[used], Fp, cones, target_ratio, max_cones, sub,
+                                 None if inner is None else inner[tris])
             except ConformalError as exc:
                 if n_parts == 1 or exc.problem.startswith('part '):
                     raise
                 raise exc.with_context(f"part {p + 1} of {n_parts} ({len(tris)} triangles)") from None
             if n_parts > 1:
-                _keep_part(repeats, V[used], Fp, res, f"part {p + 1}")
+                _keep_part(repeats, V[used], Fp, None if inner is None else poly[tris], res, f"part {p + 1}")
         done += share
         r = dict(res.report)
         r.update({'island': p + 1, 'triangles': int(len(tris)),
