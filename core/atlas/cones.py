@@ -2048,6 +2048,20 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
                 best = (key, label, kap, ev)
         return best, tried, dirty
 
+    def retry(candidates, note, until_clean=False):
+        """Lay out the cone sets ``candidates`` (pairs of cones and angles) quickly, within the layout
+        budget, keeping the best layout; ``until_clean``: stop at the first clean one."""
+        nonlocal best, S, tried
+        for S2, k2 in candidates:
+            if budget[0] >= MAX_LAYOUTS:
+                break
+            best2, tried2, _ = lay_out(S2, k2, clean_ratio(best), quick=True)
+            tried += [dict(c, angles=f"{c['angles']} ({note})") for c in tried2]
+            if best2 is not None and best2[0] > best[0]:
+                best, S = best2, S2
+            if until_clean and best[0][0]:
+                break
+
     t_lay = time.perf_counter()
     budget = [0]                         # exact layouts computed so far (at most MAX_LAYOUTS)
     best, tried, dirty = lay_out(S, kappa)
@@ -2101,27 +2115,13 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
         # a layout with a squashed or flipped triangle next to a cone realised more than the best
         # clean one: the same cones with that cone moved to a neighbour (``nudged``)
         system.bounds = kept_bounds
-        for S2, k2 in nudged(system, Fw, dirty[1], S):
-            if budget[0] >= MAX_LAYOUTS:
-                break
-            best2, tried2, _ = lay_out(S2, k2, clean_ratio(best), quick=True)
-            tried += [dict(c, angles=f"{c['angles']} (a cone next to flips moved)") for c in tried2]
-            if best2 is not None and best2[0] > best[0]:
-                best, S = best2, S2
+        retry(nudged(system, Fw, dirty[1], S), "a cone next to flips moved")
     if cones is None and n <= BIG_MESH and best is not None and not best[0][0] and len(S) < int(max_cones) \
             and budget[0] < MAX_LAYOUTS:
         # the best layout still squashes or flips a triangle away from every cone (curvature
         # concentrated at a vertex the placement left out): a cone added at one of its corners
         system.bounds = kept_bounds
-        for S2, k2 in added(system, Fw, best[3], S):
-            if budget[0] >= MAX_LAYOUTS:
-                break
-            best2, tried2, _ = lay_out(S2, k2, clean_ratio(best), quick=True)
-            tried += [dict(c, angles=f"{c['angles']} (a cone added at a defect)") for c in tried2]
-            if best2 is not None and best2[0] > best[0]:
-                best, S = best2, S2
-            if best[0][0]:
-                break
+        retry(added(system, Fw, best[3], S), "a cone added at a defect", until_clean=True)
     iso = polyhedral_cones(system, int(max_cones)) if cones is None and n <= BIG_MESH else None
     if iso is not None and not (best is not None and best[0][0] and best[3]['measured']['qc_mean'] <= QC_WARN
                                 and (target_ratio is None or best[0][2] >= target_ratio)):
