@@ -654,3 +654,24 @@ def test_islands_with_no_interior_vertex_are_unfolded_and_checked():
     P = np.array([[0.0, 0, 0], [1, 0, 0], [1, 0, 0], [0, 1, 0]])
     assert unfold_flat_disk(P, np.array([[0, 1, 3], [1, 2, 3]])) is None
     assert unfold_flat_disk(np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]), np.array([[0, 1, 2]])) is None
+
+
+def test_holes_are_cut_open_along_polygon_edges():
+    """A quad grid (bump, n = 17) with two square holes, cut open to its outer boundary: the shortest
+    paths ran along the quads' diagonals, which split two quads (two of their corners got two UVs,
+    which a polygon cannot hold). With the polygons given the cuts keep to polygon edges: no polygon
+    is split and no warning; without them the same cut is taken as before."""
+    from core import make_surface
+    from core import unwrap as core_unwrap
+    from core.atlas.unwrap import split_polygons
+    n = 17
+    V, F = make_surface('bump', n)
+    poly = np.arange(len(F)) % ((n - 1) ** 2)                        # triangles t and t + 256: one quad
+    qi, qj = poly // (n - 1), poly % (n - 1)
+    hole = ((qi >= 4) & (qi < 7) & (qj >= 4) & (qj < 7)) | ((qi >= 10) & (qi < 12) & (qj >= 9) & (qj < 13))
+    F, poly = F[~hole], poly[~hole]
+    plain = core_unwrap(V, F, holes='cut')
+    assert split_polygons(F, poly, plain.uv_corner) == 2
+    res = core_unwrap(V, F, holes='cut', tri_poly=poly)
+    assert res.report['holes_cut'] == 2 and res.report['split_polygons'] == 0 and not res.warnings
+    assert res.report['flips'] == 0 and res.report['mu_ratio'] > 0.9

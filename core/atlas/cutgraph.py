@@ -32,6 +32,22 @@ def inner_mask(E, inner, n):
     return np.isin(E[:, 0] * n + E[:, 1], inner[:, 0] * n + inner[:, 1])
 
 
+def polygon_sides(F, n, poly):
+    """(m,3) bool: side ``s`` of triangle ``t`` of ``F`` (m,3) (corners ``s`` and ``s + 1``, over ``n``
+    vertices) lies inside a polygon: the triangle across it has the same ``poly`` (m,) id (a quad's
+    diagonal, an n-gon's fan)."""
+    tw = topology.twin_halfedges(F, n).reshape(-1, 3)
+    across = np.where(tw >= 0, tw // 3, 0)
+    return (tw >= 0) & (poly[across] == poly[:, None])
+
+
+def inner_pairs(F, n, poly):
+    """The sides of ``polygon_sides`` as sorted vertex pairs (k,2), unique: the diagonals of the
+    polygons ``poly`` (m,) cut into the triangles ``F`` (m,3)."""
+    t, c = np.nonzero(polygon_sides(F, n, np.asarray(poly)))
+    return np.unique(np.sort(np.stack([F[t, c], F[t, (c + 1) % 3]], 1), 1), axis=0)
+
+
 def edge_list(V, F, inner=None):
     """Undirected edges ``E`` (e,2) (E[:,0] < E[:,1]), their weights (e,), and the (n,n) CSR graph
     whose entry (i,j) is the index of edge ij plus one. The weight is the edge's length; an edge of

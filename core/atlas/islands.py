@@ -36,6 +36,7 @@ from ..mesh import topology
 from ..mesh.repair import repair, repair_merged, require_faces, zero_area_note
 from ..disk.flatten import QC_WARN, SCALE_REMEDY, scale_variation
 from .charts import split_overlaps
+from .cutgraph import inner_mask, inner_pairs
 from .repeats import Repeats
 from .unfold import FLAT_TREE_MAX, unfold_flat_disk
 from .cut import (Cut, _seam_halfedges, boundary_crossings, cut_along_seams, seam_edge_counts,  # noqa: F401
@@ -126,12 +127,14 @@ def fill_holes(V, F, loops, rings=None):
     return np.concatenate(Vs), np.concatenate(Fs).astype(np.int64), info
 
 
-def hole_cut_paths(V, F, n, loops):
+def hole_cut_paths(V, F, n, loops, inner=None):
     """Edge paths that cut every hole open to the outer boundary, for ``holes='cut'``.
 
     Hole by hole, the shortest path (3D edge lengths, Dijkstra from all outer-loop vertices) to the
-    nearest vertex of another loop is cut, which merges that hole into the outer boundary. Returns a
-    list of (k,2) int64 vertex pairs of ``F``'s vertex ids (one per hole)."""
+    nearest vertex of another loop is cut, which merges that hole into the outer boundary. An edge of
+    ``inner`` (k,2 vertex pairs: polygons' diagonals) costs the total length on top (a cut through a
+    polygon gives its corners two UVs). Returns a list of (k,2) int64 vertex pairs of ``F``'s vertex
+    ids (one per hole)."""
     paths = []
     Fc, vmap = F, np.arange(n)
     for _ in range(len(loops) - 1):
@@ -142,6 +145,9 @@ def hole_cut_paths(V, F, n, loops):
         E, _ = topology.unique_edges(Fc)
         Vc = V[vmap]
         wgt = np.linalg.norm(Vc[E[:, 0]] - Vc[E[:, 1]], axis=1)
+        on = inner_mask(np.sort(vmap[E], 1), inner, n)
+        if on.any():
+            wgt = wgt + on * (wgt.sum() + 1.0)
         G = sp.coo_matrix((wgt, (E[:, 0], E[:, 1])), shape=(nc, nc)).tocsr()
         outer = cur[0]
         dist, pred, _ = dijkstra(G, directed=False, indices=outer, min_only=True,
@@ -292,11 +298,12 @@ def _hole_geometry_prefers_cut(V, F, loops):
     return per * per > A
 
 
-def _cut_island(V, F, loops):
-    """Cut every hole of the island (``V`` (n,3), ``F`` (m,3)) open to the outer boundary. Returns
-    (Fc (m,3) ids of the cut vertices, vert_of (N,) local vertex of each cut vertex, loops, info)."""
+def _cut_island(V, F, loops, inner=None):
+    """Cut every hole of the island (``V`` (n,3), ``F`` (m,3)) open to the outer boundary, off the
+    polygons' diagonals ``inner`` (k,2) where it can. Returns (Fc (m,3) ids of the cut vertices, vert_of
+    (N,) local vertex of each cut vertex, loops, info)."""
     n = len(V)
-    paths = hole_cut_paths(V, F, n, loops)
+    paths = hole_cut_paths(V, F, n, loops, inner)
     pairs = np.concatenate(paths) if paths else np.zeros((0, 2), np.int64)
     c = cut_along_seams(F, n, pairs)
     if c.n_islands != 1:                    # a cut path cannot disconnect a connected island
@@ -356,7 +363,7 @@ def _solve_island(V, F, holes, boundary, desc, progress, options, depth=0, poly=
                 cand = (everything, F, ident, uv, rep)
                 inputs[id(rep)] = (V, F, loops)
             else:
-                Fc, vo, lc, info = _cut_island(V, F, loops)
+                Fc, vo, lc, info = _cut_island(V, F, loops, inner_pairs(F, n, poly))
                 uv, rep = _flatten_island(V[vo], Fc, lc, holes, bnd, desc, progress, opts)
                 rep['holes'] = info
                 rep['loops_before_cut'] = len(loops)

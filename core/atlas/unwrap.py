@@ -43,6 +43,7 @@ from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_mesh, degenerat
                              normalise_scale)
 from .islands import boundary_crossings, seam_pairs, shelf_pack
 from .islands import unwrap as unwrap_islands
+from .cutgraph import polygon_sides
 from .repeats import Repeats
 
 MEASURE_KEYS = ('faces', 'flips', 'mu_ratio', 'mu_ratio_p1_p99', 'qc_mean', 'qc_max')
@@ -517,15 +518,6 @@ def split_polygons(F, tri_poly, uv_corner):
     same = (key[1:] == key[:-1]).all(1)
     differ = same & (W[1:] != W[:-1]).any(1)
     return int(len(np.unique(key[1:][differ, 0])))
-
-
-def polygon_sides(F, n, poly):
-    """(m,3) bool: side ``s`` of triangle ``t`` of ``F`` (m,3) (corners ``s`` and ``s + 1``, over ``n``
-    vertices) lies inside a polygon: the triangle across it has the same ``poly`` (m,) id (a quad's
-    diagonal, an n-gon's fan)."""
-    tw = topology.twin_halfedges(F, n).reshape(-1, 3)
-    across = np.where(tw >= 0, tw // 3, 0)
-    return (tw >= 0) & (poly[across] == poly[:, None])
 
 
 def _keep_part(repeats, V, F, poly, res, desc):
