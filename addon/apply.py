@@ -212,7 +212,9 @@ def finish(job, res, uv_name: str, packer: str, pack_note: str | None, colormap:
         'baked': bool(opts.bake), 'conformal_factor_range': list(rng) if rng else None,
         'seconds': {**seconds, 'flatten': round(res.seconds, 4)},
         'core_seconds': core.get('seconds'), 'mesh_hash': mesh_hash(md),
-        'warnings': [w for r in isl if 'error' not in r for w in r.get('warnings', [])],
+        # the core's warnings: every island's, and the mesh's own (split polygons, mirrored triangles,
+        # a triangle soup); an island skipped is listed from its report instead
+        'warnings': [w for w in res.result.warnings if not w.startswith('skipped ')],
         'island_reports': [island_summary(r) for r in isl[:MAX_ISLAND_REPORTS]],
     }
     meshio.store_report(me, REPORT_KEY, report)

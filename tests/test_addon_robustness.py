@@ -152,3 +152,22 @@ def test_infinite_coordinate_with_seams_named(addon, bl, mode):
     pos[3 * 12] = np.finfo(np.float32).max          # "inf" typed into Blender's UI
     me.attributes['position'].data.foreach_set('vector', pos)
     _fails_unchanged(bl, r'NaN or infinite coordinates \(vertices 12\): fix or delete', mode)
+
+
+def test_the_meshs_own_warnings_reach_blender(addon, bl):
+    """A grid with a block of faces wound the other way (their normals flipped): the core flattens it
+    in one orientation and warns that those triangles' UVs read mirrored against their own normals.
+    That warning is the mesh's, not an island's; the report kept only the islands' warnings, so
+    Blender said nothing."""
+    import bmesh
+    import json
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=8, y_subdivisions=8)
+    me = bpy.context.object.data
+    bm = bmesh.new()
+    bm.from_mesh(me)
+    bmesh.ops.reverse_faces(bm, faces=[f for f in bm.faces if f.calc_center_median().x > 0.3])
+    bm.to_mesh(me)
+    bm.free()
+    assert bpy.ops.uv.conformal_flatten() == {'FINISHED'}
+    report = json.loads(me['conformal_flatten_report'])
+    assert any('wound against their neighbours' in w for w in report['warnings'])
