@@ -1022,3 +1022,26 @@ def test_a_seam_through_polygons_is_warned():
     assert res.report['islands'] == 2 and res.report['split_polygons'] == n - 1
     assert any(f"{n - 1} polygon(s) are cut by a seam" in w for w in res.warnings)
     assert unwrap(V, F, tri_poly=poly).report['split_polygons'] == 0
+
+
+def test_split_polygons_counts_each_polygon_once_in_any_order():
+    """``split_polygons``: a quad whose shared corner differs, and a pentagon (a fan of three
+    triangles) whose middle triangle moved, count once each, whatever the order of the triangles; a
+    corner that no other triangle of its polygon shares may hold any UV."""
+    from core.atlas.unwrap import split_polygons
+    F = np.array([[0, 1, 2], [0, 2, 3],                        # quad 0 1 2 3
+                  [4, 5, 6], [4, 6, 7], [4, 7, 8],             # pentagon 4..8 as a fan
+                  [9, 10, 11]])                                # a triangle
+    poly = np.array([0, 0, 1, 1, 1, 2])
+    uv = np.random.default_rng(0).random((12, 2))[F]          # one UV per vertex: nothing split
+    assert split_polygons(F, poly, uv) == 0
+    bad = uv.copy()
+    bad[0, 1] += 0.5                          # the quad's first triangle at vertex 1: not shared
+    assert split_polygons(F, poly, bad) == 0
+    bad[0, 2] += 0.5                          # ... at vertex 2: shared with its other triangle
+    bad[3, 1] += 0.5                                          # the pentagon's middle triangle at vertex 6
+    assert split_polygons(F, poly, bad) == 2
+    order = np.random.default_rng(1).permutation(len(F))
+    assert split_polygons(F[order], poly[order], bad[order]) == 2
+    bad[5] = np.nan                                           # a triangle not flattened is left out
+    assert split_polygons(F, poly, bad) == 2

@@ -339,7 +339,8 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         warnings.append(f"{mirrored} triangle(s) are wound against their neighbours (their normals point "
                         "the other way): their UVs are mirrored; recalculate normals")
     dup = topology.split_duplicates(Vs, Fs) if len(islands) > 1 else 0
-    split = 0 if tri_poly is None else split_polygons(F, tri_poly, uv_corner)
+    # (a single disk has no cut at all: nothing to split)
+    split = 0 if tri_poly is None or disk else split_polygons(F, tri_poly, uv_corner)
     if split:
         warnings.append(f"{split} polygon(s) are cut by a seam through their inside: a polygon holds one UV "
                         "per corner, so theirs are wrong; triangulate them (Face > Triangulate Faces) or "
@@ -506,18 +507,29 @@ def _cone_part(V, F, cones, target_ratio, max_cones, progress, inner=None):
 def split_polygons(F, tri_poly, uv_corner):
     """How many polygons (``tri_poly`` (m,) the polygon of each triangle of ``F`` (m,3)) give one of
     their vertices two different UVs in ``uv_corner`` (m,3,2) (NaN: a triangle not flattened, left
-    out): a seam through the polygon's inside, which a polygon's corners cannot hold."""
+    out): a seam through the polygon's inside, which a polygon's corners cannot hold. A quad's two
+    triangles, next to each other as ``triangulate`` gives them, are compared directly; larger
+    polygons by a sort of their corners. A mesh of triangles has nothing to compare."""
+    tri_poly = np.asarray(tri_poly, np.int64)
+    if len(tri_poly) > 1 and (np.diff(tri_poly) < 0).any():
+        order = np.argsort(tri_poly, kind='stable')
+        F, tri_poly, uv_corner = F[order], tri_poly[order], uv_corner[order]
     ok = np.isfinite(uv_corner).all(axis=(1, 2))
-    if not ok.any():
-        return 0
-    Fk, pk = F[ok], np.asarray(tri_poly)[ok]
-    key = np.stack([np.repeat(pk, 3), Fk.ravel()], 1)
-    W = uv_corner[ok].reshape(-1, 2)
-    order = np.lexsort((key[:, 1], key[:, 0]))
-    key, W = key[order], W[order]
-    same = (key[1:] == key[:-1]).all(1)
-    differ = same & (W[1:] != W[:-1]).any(1)
-    return int(len(np.unique(key[1:][differ, 0])))
+    count = np.bincount(tri_poly, minlength=int(tri_poly.max(initial=0)) + 1)[tri_poly]
+    # two triangles: the pair's corners at the same vertex must have the same UV
+    i = np.flatnonzero((count[:-1] == 2) & (tri_poly[:-1] == tri_poly[1:]) & ok[:-1] & ok[1:])
+    same = F[i][:, :, None] == F[i + 1][:, None, :]                                     # (k,3,3)
+    differ = (uv_corner[i][:, :, None, :] != uv_corner[i + 1][:, None, :, :]).any(-1)
+    polys = [tri_poly[i[(same & differ).any(axis=(1, 2))]]]
+    big = ok & (count > 2)
+    if big.any():
+        n = int(F.max()) + 1
+        key = np.repeat(tri_poly[big], 3) * n + F[big].ravel()
+        order = np.argsort(key, kind='stable')
+        key, W = key[order], uv_corner[big].reshape(-1, 2)[order]
+        differ = (key[1:] == key[:-1]) & (W[1:] != W[:-1]).any(1)
+        polys.append(key[1:][differ] // n)
+    return int(len(np.unique(np.concatenate(polys))))
 
 
 def _keep_part(repeats, V, F, poly, res, desc):
