@@ -1045,3 +1045,28 @@ def test_split_polygons_counts_each_polygon_once_in_any_order():
     assert split_polygons(F[order], poly[order], bad[order]) == 2
     bad[5] = np.nan                                           # a triangle not flattened is left out
     assert split_polygons(F, poly, bad) == 2
+
+
+def test_a_layout_with_a_seam_inside_a_polygon_is_a_defect():
+    """Suzanne's eye (56 triangles of quads, closed): its isometric net (every curved corner a cone)
+    must be split into charts, and every splitting path crosses a quad: the net kept a seam along a
+    quad's diagonal, a polygon that cannot hold its corners' UVs. Such a seam now counts as a defect
+    like a flip, so the eye keeps a layout without one."""
+    import os
+    from core.atlas.unwrap import polygon_sides
+    from core.io.obj import read_obj
+    mesh = read_obj(os.path.join(os.path.dirname(__file__), 'data', 'suzanne.obj'))
+    F, poly = mesh.triangles()
+    n_parts, part = topology.face_components(F, len(mesh.V))
+    eye = part == part[np.flatnonzero(poly == 24)[0]]
+    used, Fp = np.unique(F[eye], return_inverse=True)
+    Fp = Fp.reshape(-1, 3)
+    inner = polygon_sides(Fp, len(used), poly[eye])
+    res = cone_unwrap(mesh.V[used], Fp, target_ratio=0.5, max_cones=48, inner=inner)
+    r = res.report
+    assert r['seams_inside_polygons'] == 0 and r['flips'] == 0 and r['overlaps'] == 0
+    t, c = np.nonzero(inner)
+    diag = {tuple(e) for e in np.sort(np.stack([Fp[t, c], Fp[t, (c + 1) % 3]], 1), 1).tolist()}
+    assert not diag & {tuple(e) for e in np.sort(res.seams, 1).tolist()}
+    # the candidates laid out include one with such a seam, which lost
+    assert any(c.get('seams_inside_polygons') for c in r['angle_candidates'])

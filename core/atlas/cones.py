@@ -57,7 +57,7 @@ from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas,
 from ..mesh.solve import Factor
 from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_arrays, check_mesh, degenerate_faces,
                              normalise_scale)
-from .cutgraph import cut_graph, is_disk, reroute_leaf, straighten, through_corner
+from .cutgraph import cut_graph, inner_mask, is_disk, reroute_leaf, straighten, through_corner
 from .charts import MAX_SPLITS, _cut_twins, _piece_crossings, merge_charts, split_overlaps  # noqa: F401
 from .cut import boundary_crossings, cut_along_seams
 
@@ -1815,6 +1815,9 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True, u=None, i
     e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]
     folded = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] <= 0
     measured['flips'] += int(folded[~good].sum())
+    # seam edges along polygons' diagonals: such a polygon cannot hold its corners' two UVs
+    measured['seams_inside_polygons'] = int(inner_mask(np.sort(seams, 1), inner, len(Vw)).sum()) \
+        if len(seams) else 0
     bad = np.nonzero(squashed | folded)[0]
     # where the layout folded before ``untangle`` patched it: the cones next to those triangles are
     # the ones ``softened`` relaxes (a patched fold still marks a cone whose metric degenerates)
@@ -2039,8 +2042,9 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
                           'degenerate': me['degenerate'], 'mu_ratio_p1_p99': me['mu_ratio_p1_p99'],
                           'mu_ratio_p1_p99_area': me['mu_ratio_p1_p99_area'],
                           'qc_mean': me['qc_mean'], 'exact': ev['info']['exact'],
-                          'charts': ev['info']['charts']})
-            defects = me['flips'] + ev['crossings'] + me['degenerate']
+                          'charts': ev['info']['charts'],
+                          'seams_inside_polygons': me['seams_inside_polygons']})
+            defects = me['flips'] + ev['crossings'] + me['degenerate'] + me['seams_inside_polygons']
             key = (defects == 0, -defects, realised_spread(me))
             if defects and len(ev['soft']) and (not dirty or key[2] > dirty[0]):
                 dirty[:] = [key[2], ev]
@@ -2220,7 +2224,8 @@ def flat_part(V, F, uv, target_ratio=0.5):
     rep = {'vertices': n, 'faces': m, 'genus': 0, 'boundary_loops': 1, 'euler': 1, 'split_vertices': 0,
            'cones': 0, 'kappa_sum': 0.0, 'kappa_min': 0.0, 'kappa_max': 0.0, 'flips': 0, 'mu_ratio': 1.0,
            'mu_ratio_p1_p99': 1.0, 'qc_mean': 1.0, 'qc_max': 1.0, 'mu_ratio_p1_p99_area': 1.0,
-           'degenerate': 0, 'overlaps': 0, 'seam_edges': 0, 'seam_length': 0.0, 'seam_fraction': 0.0,
+           'degenerate': 0, 'seams_inside_polygons': 0, 'overlaps': 0, 'seam_edges': 0, 'seam_length': 0.0,
+           'seam_fraction': 0.0,
            'branches_added': 0, 'max_wedge': float(angle_sums(V, F, n).max()), 'repair_rounds': 0,
            'exact_layout': True, 'charts': 1, 'chart_splits': 0, 'vertex_ratio': 1.0,
            'vertex_ratio_outside_rings': 1.0, 'estimated_p1_p99': 1.0, 'target_ratio': target_ratio,

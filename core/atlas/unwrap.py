@@ -495,7 +495,7 @@ def _cone_part(V, F, cones, target_ratio, max_cones, progress, inner=None):
                                  f"({failed[1].problem}): {r['cones']} cones were placed")
         if not auto:
             return res
-        defects = r['flips'] + r['overlaps'] + r.get('degenerate', 0)
+        defects = r['flips'] + r['overlaps'] + r.get('degenerate', 0) + r.get('seams_inside_polygons', 0)
         key = (defects == 0, -defects, realised_spread(r))
         if best is None or key > best[0]:
             best = (key, res)
