@@ -8,7 +8,7 @@ import numpy as np
 from ..mesh import topology
 from ..mesh.geometry import weighted_graph
 from .cut import boundary_crossings, cut_along_seams, shelf_pack
-from .cutgraph import inner_mask, is_disk
+from .cutgraph import avoiding, inner_mask, is_disk
 
 MAX_SPLITS = 30                    # an overlapping layout is split into at most MAX_SPLITS + 1 charts
                                    # (then glued back where the pieces do not overlap: ``merge_charts``;
@@ -67,9 +67,7 @@ def _interior_path(V, vert_of, E, onb, p, q, N, lp=None, inner=None):
     w = np.maximum(np.linalg.norm(V[vert_of[E[:, 0]]] - V[vert_of[E[:, 1]]], axis=1), 1e-300)
     touch = (onb[E[:, 0]] & ~end[E[:, 0]]) | (onb[E[:, 1]] & ~end[E[:, 1]])
     w = np.where(touch, 10 * w, w)
-    on = inner_mask(np.sort(vert_of[E], 1), inner, len(V))
-    if on.any():
-        w = w + on * (w.sum() + 1.0)
+    w = avoiding(w, np.sort(vert_of[E], 1), inner, len(V))
     G = weighted_graph(E, w, N)
     dist, pred = dijkstra(G, directed=False, indices=p, return_predecessors=True)
     if not np.isfinite(dist[q]):

@@ -57,7 +57,7 @@ from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas,
 from ..mesh.solve import Factor
 from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_arrays, check_mesh, degenerate_faces,
                              normalise_scale)
-from .cutgraph import cut_graph, inner_mask, is_disk, reroute_leaf, straighten, through_corner
+from .cutgraph import cut_graph, inner_mask, is_disk, reroute_leaf, side_pairs, straighten, through_corner
 from .charts import MAX_SPLITS, _cut_twins, _piece_crossings, merge_charts, split_overlaps  # noqa: F401
 from .cut import boundary_crossings, cut_along_seams
 
@@ -1884,9 +1884,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
     orig = vert_of0[keep]                     # input vertex of each working vertex
     inner_w = None
     if inner is not None:
-        inner = np.asarray(inner, bool).reshape(m, 3)
-        t, c = np.nonzero(inner)
-        inner_w = np.unique(np.sort(np.stack([Fw[t, c], Fw[t, (c + 1) % 3]], 1), 1), axis=0)
+        inner_w = side_pairs(Fw, np.asarray(inner, bool).reshape(m, 3))
     Vw, unit = normalise_scale(Vs[keep])
     n = len(Vw)
     if degenerate_faces(Vw, Fw).all():

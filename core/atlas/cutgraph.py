@@ -32,6 +32,15 @@ def inner_mask(E, inner, n):
     return np.isin(E[:, 0] * n + E[:, 1], inner[:, 0] * n + inner[:, 1])
 
 
+def avoiding(w, E, inner, n):
+    """The edge weights ``w`` (e,) of the edges ``E`` (e,2) (sorted pairs over ``n`` vertices) with the
+    total weight added to every edge of ``inner`` (k,2 vertex pairs: polygons' diagonals), so that a
+    shortest path takes one only where no path avoids them (a seam through a polygon gives it two
+    UVs at one corner, which a polygon cannot hold). ``w`` itself where there is none."""
+    on = inner_mask(E, inner, n)
+    return w + on * (w.sum() + 1.0) if on.any() else w
+
+
 def polygon_sides(F, n, poly):
     """(m,3) bool: side ``s`` of triangle ``t`` of ``F`` (m,3) (corners ``s`` and ``s + 1``, over ``n``
     vertices) lies inside a polygon: the triangle across it has the same ``poly`` (m,) id (a quad's
@@ -41,25 +50,26 @@ def polygon_sides(F, n, poly):
     return (tw >= 0) & (poly[across] == poly[:, None])
 
 
-def inner_pairs(F, n, poly):
-    """The sides of ``polygon_sides`` as sorted vertex pairs (k,2), unique: the diagonals of the
-    polygons ``poly`` (m,) cut into the triangles ``F`` (m,3)."""
-    t, c = np.nonzero(polygon_sides(F, n, np.asarray(poly)))
+def side_pairs(F, sides):
+    """The sides marked in ``sides`` (m,3) bool (side ``s`` of triangle ``t``: corners ``s`` and
+    ``s + 1`` of ``F`` (m,3)) as sorted vertex pairs (k,2), unique."""
+    t, c = np.nonzero(sides)
     return np.unique(np.sort(np.stack([F[t, c], F[t, (c + 1) % 3]], 1), 1), axis=0)
+
+
+def inner_pairs(F, n, poly):
+    """The diagonals of the polygons ``poly`` (m,) cut into the triangles ``F`` (m,3), as sorted vertex
+    pairs (k,2) (``polygon_sides``)."""
+    return side_pairs(F, polygon_sides(F, n, np.asarray(poly)))
 
 
 def edge_list(V, F, inner=None):
     """Undirected edges ``E`` (e,2) (E[:,0] < E[:,1]), their weights (e,), and the (n,n) CSR graph
-    whose entry (i,j) is the index of edge ij plus one. The weight is the edge's length; an edge of
-    ``inner`` (k,2) vertex pairs (a polygon's diagonal, ``cone_unwrap``'s ``inner``) costs the total
-    length on top, so a path takes one only where no other way exists (a seam through a polygon
-    gives it two UVs at one corner, which a polygon cannot hold)."""
+    whose entry (i,j) is the index of edge ij plus one. The weight is the edge's length, ``avoiding``
+    the polygons' diagonals ``inner`` (k,2) (``cone_unwrap``'s)."""
     n = len(V)
     E, _ = topology.unique_edges(F)
-    w = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
-    on = inner_mask(E, inner, n)
-    if on.any():
-        w = w + on * (w.sum() + 1.0)
+    w = avoiding(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1), E, inner, n)
     idx = np.arange(1, len(E) + 1)
     Gi = sp.coo_matrix((np.r_[idx, idx], (np.r_[E[:, 0], E[:, 1]], np.r_[E[:, 1], E[:, 0]])),
                        shape=(n, n)).tocsr()

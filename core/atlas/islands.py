@@ -36,7 +36,7 @@ from ..mesh import topology
 from ..mesh.repair import repair, repair_merged, require_faces, zero_area_note
 from ..disk.flatten import QC_WARN, SCALE_REMEDY, scale_variation
 from .charts import split_overlaps
-from .cutgraph import inner_mask, inner_pairs
+from .cutgraph import avoiding, inner_pairs
 from .repeats import Repeats
 from .unfold import FLAT_TREE_MAX, unfold_flat_disk
 from .cut import (Cut, _seam_halfedges, boundary_crossings, cut_along_seams, seam_edge_counts,  # noqa: F401
@@ -144,10 +144,7 @@ def hole_cut_paths(V, F, n, loops, inner=None):
             break
         E, _ = topology.unique_edges(Fc)
         Vc = V[vmap]
-        wgt = np.linalg.norm(Vc[E[:, 0]] - Vc[E[:, 1]], axis=1)
-        on = inner_mask(np.sort(vmap[E], 1), inner, n)
-        if on.any():
-            wgt = wgt + on * (wgt.sum() + 1.0)
+        wgt = avoiding(np.linalg.norm(Vc[E[:, 0]] - Vc[E[:, 1]], axis=1), np.sort(vmap[E], 1), inner, n)
         G = sp.coo_matrix((wgt, (E[:, 0], E[:, 1])), shape=(nc, nc)).tocsr()
         outer = cur[0]
         dist, pred, _ = dijkstra(G, directed=False, indices=outer, min_only=True,
