@@ -2279,9 +2279,10 @@ def nudged(system, Fw, ev, S, tries=NUDGE_TRIES):
 
 
 def added(system, Fw, ev, S, tries=NUDGE_TRIES):
-    """Cone sets for a layout ``ev`` (``_evaluate``) that flips or squashes a triangle outside every
-    cone's one-ring: a cone added at one of its corners (eligible, outside the cones' one-rings), the
-    corner of largest angle defect ``|Omega|`` first, at most ``tries``, with the area-L2 angles. Why:
+    """Cone sets for a layout ``ev`` (``_evaluate``) that flips or squashes triangles: a cone added at
+    one of their corners that is eligible and outside the cones' one-rings (a triangle next to a cone
+    is ``nudged``'s case), the corner of largest angle defect ``|Omega|`` first, at most ``tries``,
+    with the area-L2 angles. Why:
     on a coarse mesh one vertex can hold most of a feature's curvature (Suzanne's brow: 2.96 rad);
     left out of the cones, the exact metric around it degenerates (Suzanne's head at 30 cones: one
     triangle squashed in every angle set; with that vertex a cone, clean at 0.482).

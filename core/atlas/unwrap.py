@@ -545,10 +545,9 @@ def _keep_part(repeats, V, F, poly, res, desc):
 
 def _repeated_part(repeats, V, F, poly):
     """The ``ConeResult`` of an earlier part of which the part ``V`` (n,3), ``F`` (m,3), ``poly`` (m,) or
-    None is a copy (up to
-    a rotation and a translation, or a reflection: ``Repeats.find``), carried onto this part's vertices
-    and corners, or None. A copy has the same edge lengths, so the same cones and the same layout (a
-    mirror image's reflected); its report says which part it repeats."""
+    None is a copy (up to a rotation and a translation, or a reflection: ``Repeats.find``), carried
+    onto this part's vertices and corners, or None. A copy has the same edge lengths, so the same
+    cones and the same layout (a mirror image's reflected); its report says which part it repeats."""
     from .cones import ConeResult
     same = repeats.find(V, F, poly)
     if same is None:
