@@ -109,3 +109,27 @@ def test_norm3_is_numpys_norm_bit_for_bit():
     assert np.array_equal(norm3(x), np.linalg.norm(x, axis=2))
     assert np.array_equal(norm3(x[:, 0]), np.linalg.norm(x[:, 0], axis=1))
     assert norm3(np.array([3.0, 4.0, 12.0])) == 13.0
+
+
+def test_squashed_faces_count_the_maps_squash_not_the_meshs_own_needles():
+    """``shape_anisotropy`` is 1 for an equilateral triangle and about length / width for a needle, in
+    any scale and orientation; ``squashed_faces`` counts a fat triangle mapped to a sliver, and leaves
+    out a needle of the mesh mapped to a fat triangle (its Jacobian is ill-conditioned by its own
+    shape) and a needle mapped to itself."""
+    from core.mesh.measures import jacobians, shape_anisotropy, singular_values, squashed_faces
+    h = np.sqrt(3) / 2
+    V = np.array([[0, 0, 0], [1, 0, 0], [0.5, h, 0], [2, 0, 0], [3, 0, 0], [2.5, 1e-5, 0]], float)
+    F = np.array([[0, 1, 2], [3, 4, 5]])
+    R = np.linalg.qr(np.random.default_rng(1).standard_normal((3, 3)))[0]
+    for W in (V, 7.5 * V @ R.T):
+        an = shape_anisotropy(W, F)
+        assert abs(an[0] - 1) < 1e-9 and 0.5e5 < an[1] < 2e5
+    sliver = np.array([[0, 0], [1, 0], [0.5, 1e-5], [2, 0], [3, 0], [2.5, h]])
+    same = V[:, :2]
+    an = shape_anisotropy(V, F)
+    got = squashed_faces(singular_values(jacobians(V, F, sliver)[0]), an, 1e3)
+    assert got.tolist() == [True, False]
+    got = squashed_faces(singular_values(jacobians(V, F, same)[0]), an, 1e3)
+    assert got.tolist() == [False, False]
+    line = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], float)
+    assert shape_anisotropy(line, np.array([[0, 1, 2]]))[0] == np.inf

@@ -53,7 +53,8 @@ from ..mesh.intrinsic import corner_cotangents as corner_cotangents_l
 from ..mesh.intrinsic import face_areas as face_areas_l
 from ..mesh.intrinsic import intrinsic_delaunay, layout
 from ..mesh.laplacian import cotan_laplacian
-from ..mesh.measures import jacobians, measures_from_jacobians, signed_uv_areas, singular_values
+from ..mesh.measures import (jacobians, measures_from_jacobians, shape_anisotropy, signed_uv_areas,
+                             singular_values, squashed_faces)
 from ..mesh.solve import Factor
 from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_arrays, check_mesh, degenerate_faces,
                              normalise_scale)
@@ -150,6 +151,7 @@ class ConeSystem:
         # zero-area triangles (three different vertices in a line) get a valid intrinsic metric by
         # mollification and are left out of every measure (docs/robustness.md)
         self.degenerate = degenerate_faces(V, F)
+        self.anisotropy = shape_anisotropy(V, F)         # (m,) how thin each triangle is (1: equilateral)
         if intrinsic or self.degenerate.any():
             # the intrinsic Delaunay Laplacian (nonnegative interior weights: no spikes of u next to
             # needle triangles); Omega does not change under intrinsic flips (docs/robustness.md)
@@ -1806,10 +1808,10 @@ def _evaluate(Vw, Fw, system, S, kappa, seams, cache=None, split=True, u=None, i
     J, A = jacobians(Vw[cut.vert_of], Fc[good], uvc)
     measured, mu = measures_from_jacobians(J, A)
     measured['mu_ratio_p1_p99_area'] = weighted_spread(mu, A)
-    sv = singular_values(J)
-    # a triangle squashed to (nearly) nothing is as unusable as a flipped one
+    # a triangle squashed to (nearly) nothing is as unusable as a flipped one (the mesh's own needles
+    # and caps left out: the exact metric inflates a cap, docs/cones.md)
     squashed = np.zeros(len(Fc), bool)
-    squashed[good] = sv[:, 1] <= DEGENERATE_QC ** -1 * sv[:, 0]
+    squashed[good] = squashed_faces(singular_values(J), system.anisotropy[good], DEGENERATE_QC)
     measured['degenerate'] = int(squashed.sum())
     W = uvc[Fc]
     e1, e2 = W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]

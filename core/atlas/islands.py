@@ -238,7 +238,7 @@ def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
                              "numerically degenerate", 'degenerate', 'clean_mesh')
     uv = (uv - uv.mean(0)) * np.sqrt(face_areas(V, F).sum() / a_uv)
     ok = ~degenerate_faces(V, F)
-    rep.update(uv_measures(V, F[ok], uv))
+    rep.update(uv_measures(V, F[ok], uv, squash_limit=SQUASHED_QC))
     if not ok.all():
         rep['degenerate_faces'] = int((~ok).sum())
         rep['flips'] += int((signed_uv_areas(uv, F[~ok]) < 0).sum())
@@ -269,7 +269,11 @@ def _island_warnings(rep):
 
 def _squashed(rep):
     """True if the map of the report ``rep`` squashes a triangle nearly flat (s1/s2 above
-    ``SQUASHED_QC``): a defect like a flip (the triangle's texture is a smear)."""
+    ``SQUASHED_QC``): a defect like a flip (the triangle's texture is a smear). The count
+    ``squashed`` (``squashed_faces``: needles and caps of the mesh itself left out) where the report
+    has it, else ``qc_max``."""
+    if 'squashed' in rep:
+        return rep['squashed'] > 0
     return not rep.get('qc_max', np.inf) <= SQUASHED_QC
 
 
@@ -316,7 +320,7 @@ def _flat_island(n_faces, boundary, options):
     certified bound of 1 (no interior vertex). Hair cards and triangle soups are thousands of such
     islands."""
     rep = {'loops': 1, 'faces': int(n_faces), 'flips': 0, 'mu_ratio': 1.0, 'mu_ratio_p1_p99': 1.0,
-           'qc_mean': 1.0, 'qc_max': 1.0, 'overlaps': 0, 'vertex_ratio': 1.0,
+           'qc_mean': 1.0, 'qc_max': 1.0, 'squashed': 0, 'overlaps': 0, 'vertex_ratio': 1.0,
            'operators': {'mode': 'auto', 'intrinsic': False}, 'seconds': 0.0, 'boundary_used': boundary}
     if options.get('bound'):
         rep['bound_vertex'] = 1.0

@@ -246,15 +246,16 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         zero = degenerate_faces(fixed.V, fixed.F)
         if zero.any():                          # kept: cone_unwrap mollifies them, as islands do
             fixed.repairs.append(zero_area_note(int(zero.sum())))
+        poly_s = None if tri_poly is None else tri_poly[sel]
         uv_r, isl_r, islands, seams_r, cone_r = cone_layout(
             fixed.V, fixed.F, cones=cones, target_ratio=target_ratio, max_cones=max_cones, fit=fit,
             pack=pack, margin=margin, progress=progress,
-            poly=None if tri_poly is None else tri_poly[sel][fixed.face_map])
+            poly=None if poly_s is None else poly_s[fixed.face_map])
         uv_corner_s = np.full((len(Fs), 3, 2), np.nan)
         uv_corner_s[fixed.face_map] = np.where(fixed.flipped[:, None, None], uv_r[:, [0, 2, 1]], uv_r)
         rest, kept = fixed.dropped, fixed.face_map
         while len(rest):               # a dropped triangle next to a filled one is filled in the next round
-            _fill_dropped(Fs if root is None else root[Fs], uv_corner_s, kept, rest)
+            _fill_dropped(Fs if root is None else root[Fs], uv_corner_s, kept, rest, poly=poly_s)
             done = np.isfinite(uv_corner_s[rest]).all(axis=(1, 2))
             if not done.any():
                 break
@@ -372,12 +373,14 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
 SOUP_FRACTION = 0.5
 
 
-def _fill_dropped(F, uv_corner, kept, dropped):
+def _fill_dropped(F, uv_corner, kept, dropped, poly=None):
     """Corner UVs (in place in ``uv_corner`` (m,3,2)) for the ``dropped`` (k,) triangles of ``F`` (m,3)
     (the repair left them out: a repeated vertex, a duplicate, or collapsed by merging coincident
     vertices, ``F`` then holding the merged ids): from a ``kept`` triangle that shares an edge with
     one, in one island, so that a zero-area triangle stays a point or a segment of its neighbour in
-    UV. A dropped triangle with no such neighbour keeps NaN (not flattened)."""
+    UV. With ``poly`` (m,) (the polygon of each triangle) a neighbour in the same polygon is taken
+    first, so that a seam along the edge does not give the polygon's corner two UVs. A dropped
+    triangle with no such neighbour keeps NaN (not flattened)."""
     n = int(F.max()) + 1
     Fk = F[kept]
     e_a = np.concatenate([Fk[:, [0]], Fk[:, [1]], Fk[:, [2]]], 1)
@@ -398,6 +401,11 @@ def _fill_dropped(F, uv_corner, kept, dropped):
         hit = todo & (key_s[at] == q)
         if not hit.any():
             continue
+        if poly is not None:               # the edge's other kept side, if it is in the same polygon
+            nx = np.minimum(at + 1, len(key_s) - 1)
+            alt = hit & (key_s[nx] == q) & (poly[kept[side_face[order[nx]]]] == poly[dropped]) \
+                & (poly[kept[side_face[order[at]]]] != poly[dropped])
+            at = np.where(alt, nx, at)
         f = kept[side_face[order[at[hit]]]]
         p = side_pos[order[at[hit]]]
         rows = dropped[hit]

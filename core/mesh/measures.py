@@ -50,6 +50,29 @@ def singular_values(J):
     return np.stack([Qc + Rc, np.abs(Qc - Rc)], axis=1)
 
 
+def shape_anisotropy(V, F):
+    """(m,) how thin each triangle of ``V`` (n,3), ``F`` (m,3) is: s1/s2 of the affine map from an
+    equilateral triangle onto it (1 for an equilateral triangle, about length / width for a needle or
+    a cap; inf at zero area). Dimensionless and independent of scale and orientation."""
+    (p, q, r), _ = local_frames(V, F)
+    M = np.zeros((len(F), 2, 2))
+    M[:, 0, 0] = p
+    M[:, 0, 1] = (2.0 * q - p) / np.sqrt(3.0)
+    M[:, 1, 1] = 2.0 * r / np.sqrt(3.0)
+    s = singular_values(M)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        return np.where(s[:, 1] > 0, s[:, 0] / s[:, 1], np.inf)
+
+
+def squashed_faces(sv, anisotropy, limit):
+    """(m,) bool: the triangles that a map with singular values ``sv`` (m,2) (largest first) shears past
+    ``s1/s2 > limit``, leaving out those whose own shape is already that thin (``anisotropy`` (m,) of
+    ``shape_anisotropy`` at least ``limit``). A needle or a cap has an ill-conditioned Jacobian under any
+    map that does not keep its exact shape (a conformal metric with a varying scale inflates a cap), and
+    it has next to no area to show a texture on."""
+    return (sv[:, 1] * limit <= sv[:, 0]) & (anisotropy < limit)
+
+
 def determinants(J):
     """Determinants (m,) of 2x2 matrices J (m,2,2)."""
     return J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
@@ -86,17 +109,21 @@ def measures_from_jacobians(J, A):
     det = determinants(J)
     c = np.sqrt((np.abs(det) * A).sum() / A.sum())
     mu = np.sqrt(np.abs(det)) / c
-    qc = s[:, 0] / np.maximum(s[:, 1], np.finfo(float).tiny)
+    with np.errstate(over='ignore'):                 # a triangle mapped to a segment: inf
+        qc = s[:, 0] / np.maximum(s[:, 1], np.finfo(float).tiny)
     orient = det * np.sign(np.median(det))
     return summarise(mu, qc, A, orient), mu
 
 
-def uv_measures(V, F, UV):
+def uv_measures(V, F, UV, squash_limit=None):
     """docs/math.md §3 measures of a UV map: dict with faces, flips, mu_ratio, mu_ratio_p1_p99,
     qc_mean (area-weighted) and qc_max, and with flips ``flips_folded`` (``folded_flips``). ``V``
-    (n,3), ``F`` (m,3), ``UV`` (n,2)."""
+    (n,3), ``F`` (m,3), ``UV`` (n,2). With ``squash_limit`` (an s1/s2) also ``squashed``: how many
+    triangles the map shears past it (``squashed_faces``)."""
     J, A = jacobians(V, F, UV)
     rep = measures_from_jacobians(J, A)[0]
+    if squash_limit is not None:
+        rep['squashed'] = int(squashed_faces(singular_values(J), shape_anisotropy(V, F), squash_limit).sum())
     if rep['flips']:
         rep['flips_folded'] = folded_flips(V, F, J)
     return rep
