@@ -55,7 +55,7 @@ import time
 import numpy as np
 
 from ..errors import ConformalError
-from ..mesh.geometry import edge_graph, face_areas
+from ..mesh.geometry import cross, edge_graph, face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
 from .planar import plane_coordinates, planar_paths
 from ..atlas.unfold import unfold_flat_disk
@@ -135,12 +135,14 @@ def face_metric_inverse(V: np.ndarray, F: np.ndarray, uv: np.ndarray) -> np.ndar
     differential of the inverse map, UV to 3D). The surface eikonal ``|grad_X T| = 1`` becomes
     ``grad_uv T^T G^-1 grad_uv T = 1`` (docs/math.md, "Geodesic distance on the conformal plane"); for an
     exactly conformal triangle ``G^-1 = mu^2 I``. With ``E3`` (3,2) the 3D edge vectors and ``E2`` (2,2)
-    the UV ones, ``G^-1 = E2 (E3^T E3)^-1 E2^T``."""
+    the UV ones, ``G^-1 = E2 (E3^T E3)^-1 E2^T``. A triangle of (nearly) zero area, such as a cap
+    whose corners a Boolean left in a line, gets a huge, finite metric."""
     X = V[F]
     U = uv[F]
     e1, e2 = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
     g11, g12, g22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-    det = g11 * g22 - g12 * g12
+    # det(E3^T E3) = |e1 x e2|^2: never negative, and without the cancellation of g11 g22 - g12^2
+    det = np.maximum((cross(e1, e2) ** 2).sum(1), 1e-24 * g11 * g22 + np.finfo(float).tiny)
     i11, i12, i22 = g22 / det, -g12 / det, g11 / det                  # (E3^T E3)^-1
     p = U[:, 1] - U[:, 0]                                              # E2 columns
     q = U[:, 2] - U[:, 0]
