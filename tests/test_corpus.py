@@ -116,6 +116,43 @@ def test_repair_is_invariant_to_face_order():
     assert a == b
 
 
+def _moebius_strip(n=40, w=5):
+    """A Moebius strip, ``n`` quads around and ``w - 1`` across, each quad two triangles wound alike:
+    the windings agree everywhere but across the last column of quads, where the strip closes with
+    its half twist."""
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    s = np.linspace(-0.3, 0.3, w)
+    T, S = np.meshgrid(t, s, indexing='ij')
+    R = 1 + S * np.cos(T / 2)
+    V = np.stack([R * np.cos(T), R * np.sin(T), S * np.sin(T / 2)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(n), np.arange(w - 1), indexing='ij')
+    a = (i * w + j).ravel()
+    last = (i == n - 1).ravel()
+    c = np.where(last, w - 1 - j.ravel(), a + w)              # the twist: the far side reversed
+    d = np.where(last, w - 2 - j.ravel(), a + w + 1)
+    F = np.concatenate([np.c_[a, a + 1, d], np.c_[a, d, c]])
+    return V, F
+
+
+def test_a_moebius_strip_is_cut_where_its_windings_disagree():
+    """A non-orientable part is cut open along edges whose faces disagree. The cut used to follow a
+    breadth-first tree of the faces, which turned 156 of the strip's 320 triangles against the
+    input's winding: their UVs came out mirrored, with a warning to recalculate normals, which no
+    recalculation can satisfy on a Moebius strip. The faces the input winds alike now stay together,
+    so the cut runs where the strip closes with its twist: no face turned, no flip, no warning."""
+    V, F = _moebius_strip()
+    res = unwrap(V, F)
+    kinds = {x['repair']: x['count'] for x in res.report['repairs']}
+    assert kinds.get('non_orientable_edges_cut') == 4 and 'faces_reoriented' not in kinds
+    assert res.report['flips'] == 0
+    from core import unwrap as core_unwrap
+    assert not core_unwrap(V, F).warnings
+    perm = np.random.default_rng(3).permutation(len(F))
+    assert {x['repair']: x['count'] for x in repair(V, F[perm]).repairs} == \
+        {x['repair']: x['count'] for x in repair(V, F).repairs}
+    _check_clean(res, F)
+
+
 def test_non_manifold_edge_splits_islands():
     from meshgen import grid
     V, F = grid(5)

@@ -51,6 +51,24 @@ class Repaired:
         return bool(self.repairs)
 
 
+def _orientation_parity(n_nodes, rows, cols, par):
+    """Orientation parity (n_nodes,) int8 of every face and its component label (n_nodes,), for the
+    face graph's edges ``rows``-``cols`` with parity ``par`` (1 when the two faces run the shared edge
+    the same way, so one of them must flip). The faces that the input already orients alike (joined
+    by edges of parity 0) form groups that keep their relative orientation; a spanning forest of the
+    groups (``_tree_parity``) orients them against each other. On an orientable mesh that is the only
+    answer; on a non-orientable one (a Moebius strip) the edges left disagreeing, where the cut goes,
+    are edges where the input's own windings disagree, so no face is turned for nothing."""
+    agree = par == 0
+    G = sp.coo_matrix((np.ones(int(agree.sum()), np.int8), (rows[agree], cols[agree])),
+                      shape=(n_nodes, n_nodes)).tocsr()
+    n_groups, group = connected_components(G, directed=False)
+    a, b = group[rows[~agree]], group[cols[~agree]]
+    apart = a != b
+    acc, lab = _tree_parity(n_groups, a[apart], b[apart], np.ones(int(apart.sum()), np.int8))
+    return acc[group], lab[group]
+
+
 def _tree_parity(n_nodes, rows, cols, par):
     """Orientation parity (n_nodes,) int8 of every face relative to its component's root, along a
     spanning forest of the face graph (edges ``rows``-``cols`` with parity ``par``: 1 when the two faces
@@ -151,7 +169,7 @@ def repair(V, F) -> Repaired:
     h1, h2 = pair_h[0::2], pair_h[1::2]
     same_dir = H[h1, 0] == H[h2, 0]                               # both faces run the edge the same way
     # 4. orientation per component
-    flip_par, flab = _tree_parity(mk, h1 // 3, h2 // 3, same_dir.astype(np.int8))
+    flip_par, flab = _orientation_parity(mk, h1 // 3, h2 // 3, same_dir.astype(np.int8))
     # keep the majority of each component unflipped
     ncomp = int(flab.max()) + 1
     flips_per = np.bincount(flab, flip_par, minlength=ncomp)
