@@ -153,6 +153,21 @@ def test_a_moebius_strip_is_cut_where_its_windings_disagree():
     _check_clean(res, F)
 
 
+def test_faces_wound_the_wrong_way_are_turned_on_a_big_mesh():
+    """Every third triangle of a 179k-triangle surface wound the wrong way: the windings split the
+    faces into 60k groups that the input orients alike, and the groups are oriented through keys of
+    their pairs (which overflowed with 32-bit group labels). The faces turned are exactly the wound
+    ones."""
+    from core.surfaces import make_surface
+    V, F = make_surface('bump', 300)
+    bad = np.zeros(len(F), bool)
+    bad[::3] = True
+    Fw = np.where(bad[:, None], F[:, ::-1], F)
+    R = repair(V, Fw)
+    assert {x['repair']: x['count'] for x in R.repairs} == {'faces_reoriented': int(bad.sum())}
+    assert np.array_equal(R.flipped, bad)
+
+
 def test_non_manifold_edge_splits_islands():
     from meshgen import grid
     V, F = grid(5)

@@ -63,6 +63,7 @@ def _orientation_parity(n_nodes, rows, cols, par):
     G = sp.coo_matrix((np.ones(int(agree.sum()), np.int8), (rows[agree], cols[agree])),
                       shape=(n_nodes, n_nodes)).tocsr()
     n_groups, group = connected_components(G, directed=False)
+    group = group.astype(np.int64)               # (int32 labels: their pair keys would overflow)
     a, b = group[rows[~agree]], group[cols[~agree]]
     apart = a != b
     acc, lab = _tree_parity(n_groups, a[apart], b[apart], np.ones(int(apart.sum()), np.int8))
