@@ -12,7 +12,8 @@ seams), the core's own time of ``area`` and of ``uniform`` with the certified bo
 ``--repeat`` runs (wall, and CPU of all threads), against Blender's CONFORMAL unwrap in this process
 (best of as many), with the ratio and whether the acceptance line (ours at most Blender's wall time)
 is met; with ``--threads``, whether splitting 32 right-hand sides over two threads helps the solver
-backend.
+backend. ``--scans`` adds the scan-like disks of ``tests/meshgen`` (``SCANS``: 3k-16k triangles,
+random points Delaunay-triangulated and lifted, as a scanner leaves a patch), through ``flatten``.
 """
 import argparse
 import json
@@ -78,6 +79,18 @@ def maze(slots=25, rows=60, corridor=3):
 
 CORPUS = ['woody', 'alligator', 'suzanne', 'teapot', 'spot', 'beast', 'stanford-bunny']
 SURFACES = ['bump', 'bump3', 'edgebump', 'ridge', 'saddle']      # bench/flatten_table.py's surfaces
+# scan-like disks (tests/meshgen): name -> (generator, arguments)
+SCANS = {'hemisphere 4k': ('steep_rim', (2000, 1, 0.5, 1.0)), 'scan patch 3k': ('scan_patch', (1500, 3)),
+         'steep rim 6k': ('steep_rim', (3000, 1)), 'jagged cap 10k': ('jagged_cap', (5,)),
+         'scan patch 12k': ('scan_patch', (6000, 3)), 'hemisphere 16k': ('steep_rim', (8000, 1, 0.5, 1.0))}
+
+
+def _scan_mesh(name):
+    """(V, F) of the scan-like disk ``name`` of ``SCANS``."""
+    sys.path.insert(0, os.path.join(ROOT, 'tests'))
+    import meshgen
+    fn, args = SCANS[name]
+    return getattr(meshgen, fn)(*args)
 
 
 def _corpus_mesh(name):
@@ -109,7 +122,7 @@ def _best(fn, repeat):
     return best, wall, cpu
 
 
-def latency(sizes, blender=True, corpus=True, repeat=3, threads=False, out=None):
+def latency(sizes, blender=True, corpus=True, repeat=3, threads=False, out=None, scans=False):
     """Issue 16 acceptance table: core seconds of ``uniform`` with the certified bound (``bound=True``)
     against Blender's CONFORMAL unwrap in this process, best of ``repeat`` runs each (the machine is
     shared), wall and CPU, the ratio and whether it is met (ours <= Blender's wall time), with
@@ -128,6 +141,7 @@ def latency(sizes, blender=True, corpus=True, repeat=3, threads=False, out=None)
     print('|---' * 11 + '|')
     rows = []
     cases = [('surface', name, n) for n in sizes for name in SURFACES] + [('maze', 'maze', 0)]
+    cases += [('scan', name, 0) for name in SCANS] if scans else []
     if corpus:
         from meshes import corpus_dir
         if os.path.isdir(corpus_dir()):
@@ -140,7 +154,7 @@ def latency(sizes, blender=True, corpus=True, repeat=3, threads=False, out=None)
         if kind == 'corpus':
             V, F, seams = _corpus_mesh(name)
         else:
-            V, F = maze() if kind == 'maze' else make_surface(name, n)
+            V, F = maze() if kind == 'maze' else _scan_mesh(name) if kind == 'scan' else make_surface(name, n)
         base = min(blender_unwrap(V, F, 'CONFORMAL', seams=seams)[1] for _ in range(repeat)) \
             if blender else float('nan')
         if kind == 'corpus':
@@ -207,10 +221,11 @@ def main():
     ap.add_argument('--repeat', type=int, default=3, help='--latency: best of this many runs')
     ap.add_argument('--threads', action='store_true', help='--latency: also the two-thread solve test')
     ap.add_argument('--json', help='--latency: write the rows at full precision to this file')
+    ap.add_argument('--scans', action='store_true', help='--latency: also the scan-like disks (SCANS)')
     args = ap.parse_args()
     if args.latency:
         latency(args.small_n, blender=not args.no_blender, corpus=not args.no_corpus, repeat=args.repeat,
-                threads=args.threads, out=args.json)
+                threads=args.threads, out=args.json, scans=args.scans)
         return
     print(f"{'n':>5} {'faces':>9} {'mode':8} {'seconds':>8} {'peak MB':>8} {'mu_ratio':>8} "
           f"{'qc_mean':>8} {'flips':>5} {'vs Blender CONFORMAL':>21}")

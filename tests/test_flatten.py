@@ -375,3 +375,27 @@ def test_orientation_of_a_symmetric_map_does_not_hang_on_round_off():
         out = normalise_uv(F, turned + 1e-13 * rng.normal(size=uv.shape), 8.0)
         assert np.abs(out - ref).max() < 1e-9
     assert np.abs(normalise_uv(F, -turned, 8.0) - ref).max() < 1e-9          # a half turn of the input
+
+
+@pytest.mark.parametrize('seed', [2, 3])
+def test_a_scan_with_crumpled_spots_gets_a_clean_uniform_map(seed):
+    """A scan-like patch (``scan_patch(6000, seed)``, 12k triangles) has 2-3 triangles folded over in
+    the mesh itself. Their flips are the mesh's, yet ``uniform``, the default, returned LSCM maps with
+    qc_mean 3e8-7e8: the area map flipped them, so the optimiser would not start; the other operators
+    were ranked below by one flip more; and a map that squashed two triangles to segments (no flip)
+    ranked above a clean one. Now a mesh-folded flip does not count against a map, a squashed
+    triangle does, and the optimiser runs without the folded triangles."""
+    from meshgen import scan_patch
+    from core.mesh.geometry import folded_faces
+    V, F = scan_patch(6000, seed)
+    folded = int(folded_faces(V, F).sum())
+    assert folded >= 2
+    area = flatten(V, F, boundary='area').report
+    uni = flatten(V, F, boundary='uniform').report
+    for r in (area, uni):
+        assert r['qc_mean'] < 1.05 and r['flips'] <= folded + 1 and not r.get('squashed')
+        assert r['mu_ratio'] > 0.2
+    assert uni['mu_ratio'] >= area['mu_ratio'] * (1 - 1e-9)
+    if seed == 3:                            # the area map's only flips are the mesh's: optimised
+        assert 'fallback' not in uni and uni['folded_left_out'] == folded
+        assert uni['flips'] == uni['flips_folded'] and uni['mu_ratio'] > area['mu_ratio']

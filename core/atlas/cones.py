@@ -53,8 +53,8 @@ from ..mesh.intrinsic import corner_cotangents as corner_cotangents_l
 from ..mesh.intrinsic import face_areas as face_areas_l
 from ..mesh.intrinsic import intrinsic_delaunay, layout
 from ..mesh.laplacian import cotan_laplacian
-from ..mesh.measures import (jacobians, measures_from_jacobians, shape_anisotropy, signed_uv_areas,
-                             singular_values, squashed_faces)
+from ..mesh.measures import (SQUASHED_QC, jacobians, measures_from_jacobians, shape_anisotropy,
+                             signed_uv_areas, singular_values, squashed_faces)
 from ..mesh.solve import Factor
 from ..mesh.validate import (DEFAULT_MAX_FACES, as_arrays, check_arrays, check_mesh, degenerate_faces,
                              normalise_scale)
@@ -68,7 +68,7 @@ KAPPA_LEAF = 0.4                   # a cone at a leaf of the cut needs kappa > 0
 ANGLE_FLOORS = (-2.0, -1.0, 0.1)   # lower bounds of the angle candidates laid out and compared
 BIG_MESH = 20_000                  # above this many vertices: no L2 start, fewer layouts (and the
                                    # automatic mode: BFF's greedy only, no cone moves)
-DEGENERATE_QC = 1e3                # a layout triangle with s1/s2 above this counts as degenerate
+DEGENERATE_QC = SQUASHED_QC        # a layout triangle with s1/s2 above this counts as degenerate
 REPAIR_ROUNDS = 3                  # local clamped-weight re-solves of a folded harmonic layout
 MOLLIFY = 1e-4                     # intrinsic mollification of zero-area triangles (relative)
 UNTANGLE_ROUNDS = 3                # then sweeps of single-vertex moves over the corners still folded

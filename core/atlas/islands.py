@@ -30,8 +30,8 @@ from scipy.sparse.csgraph import dijkstra
 
 from ..errors import ConformalError
 from ..mesh.geometry import face_areas
-from ..mesh.measures import (determinants, flip_warning, jacobians, signed_uv_areas, singular_values,
-                             uv_measures)
+from ..mesh.measures import (SQUASHED_QC, determinants, flip_warning, jacobians, signed_uv_areas,
+                             singular_values, uv_measures)
 from ..mesh import topology
 from ..mesh.repair import repair, repair_merged, require_faces, zero_area_note
 from ..disk.flatten import QC_WARN, SCALE_REMEDY, scale_variation
@@ -287,7 +287,6 @@ def _score(rep):
 
 
 DETACH_QC = 10.0                 # triangles this sheared in an island's best map are detached
-SQUASHED_QC = 1e3                # a map with a triangle this sheared is defective (``_squashed``)
 AUTO_TRY_BOTH_FACES = 150_000    # holes='auto' flattens both ways up to this size, else decides by geometry
 
 

@@ -24,10 +24,11 @@ import scipy.sparse as sp
 from ..background import beside
 from ..blas import one_thread
 from ..errors import ConformalError
-from ..mesh.geometry import angle_sums, face_areas
+from ..mesh.geometry import angle_sums, face_areas, folded_faces
 from ..mesh.laplacian import cotan_laplacian
-from ..mesh.measures import (folded_flips, flip_warning, local_frames, jacobians_from_frames,
-                             measures_from_jacobians, signed_uv_areas)
+from ..mesh.measures import (SQUASHED_QC, folded_flips, flip_warning, jacobians_from_frames, local_frames,
+                             measures_from_jacobians, shape_anisotropy, signed_uv_areas, singular_values,
+                             squashed_faces)
 from ..mesh.intrinsic import intrinsic_delaunay
 from ..mesh.solve import Factor, FactorJob, factor_all, fill_order, sub_order
 from .lscm import lscm
@@ -385,11 +386,32 @@ def _loose_vertices(V, F):
     return used, remap
 
 
+def _optimise(system, V, F, mask, progress, options):
+    """``optimise`` on the triangles ``mask`` (m,) bool or None. Where the area map folds and the mesh
+    has triangles folded over in itself (``folded_faces``: a crumpled spot of a scan, whose flip is
+    the mesh's, not the map's), the optimiser runs again without them: they keep whatever
+    orientation the map gives them, and the measures report them (``flips_folded``). Returns ``(u,
+    uv, info)``; raises ``ConformalError`` as ``optimise`` does."""
+    try:
+        return optimise(system, progress=progress, real_faces=mask, **options)
+    except ConformalError as exc:
+        folded = folded_faces(V, F) if 'folds' in exc.problem else None
+        keep = None if folded is None else ~folded if mask is None else mask & ~folded
+        if folded is None or not folded.any() or not keep.any():
+            raise
+        u, uv, info = optimise(system, progress=progress, real_faces=keep, **options)
+        info['folded_left_out'] = int(folded.sum() if mask is None else (folded & mask).sum())
+        return u, uv, info
+
+
 def _quality_key(r):
-    """Sort key of a measured map report (lower is better): flips, qc_mean over budget, -mu_ratio."""
+    """Sort key of a measured map report (lower is better): the map's own defects (flips and
+    triangles squashed nearly flat, ``squashed``), qc_mean over budget, -mu_ratio. A flip of a
+    triangle that is folded over in the mesh itself (``flips_folded``: a crumpled spot of a scan) is
+    the mesh's, whichever operators ran: it does not count here."""
     mu = r.get('mu_ratio', 0.0)
-    return (r.get('flips', 0) + r.get('degenerate_flips', 0), not r.get('qc_mean', np.inf) <= QC_WARN,
-            -(mu if np.isfinite(mu) else 0.0))
+    own = r.get('flips', 0) - r.get('flips_folded', 0) + r.get('degenerate_flips', 0) + r.get('squashed', 0)
+    return (own, not r.get('qc_mean', np.inf) <= QC_WARN, -(mu if np.isfinite(mu) else 0.0))
 
 
 def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operators, checked_loop=None,
@@ -453,7 +475,7 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
         uv = system.map_from_u(u)
     else:
         try:
-            u, uv, opt = optimise(system, progress=report_progress, real_faces=mask, **options)
+            u, uv, opt = _optimise(system, V, F, mask, report_progress, options)
             report.update(opt)
         except ConformalError as exc:
             if exc.code not in ('invalid_input', 'solve_failed', 'degenerate') and 'folds' not in exc.problem:
@@ -498,6 +520,10 @@ def _measured(report, uv, u, F, mask, A, jacobians, fit, unit, warnings, timings
     report.update(measured)
     if V is not None and measured.get('flips'):
         report['flips_folded'] = folded_flips(V, F, J, mask)
+    if V is not None and not measured['qc_max'] <= SQUASHED_QC:
+        # triangles squashed nearly flat (a defect like a flip; the mesh's own needles left out)
+        sv = singular_values(J if mask is None else J[mask])
+        report['squashed'] = int(squashed_faces(sv, shape_anisotropy(V, Fm), SQUASHED_QC).sum())
     if u is not None:
         used = np.unique(Fm)
         report['vertex_ratio'] = float(np.exp(u[used].min() - u[used].max()))

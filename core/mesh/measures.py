@@ -3,6 +3,8 @@ import numpy as np
 
 from .geometry import cross, folded_faces, norm3
 
+SQUASHED_QC = 1e3        # a map that shears a triangle past this s1/s2 squashes it (``squashed_faces``)
+
 
 def _local_frames(P):
     """P (m,3,3) triangles -> Q (m,3,2) the same triangles in their own plane, and areas (m,)."""
