@@ -121,11 +121,13 @@ def uv_measures(V, F, UV, squash_limit=None):
     """docs/math.md §3 measures of a UV map: dict with faces, flips, mu_ratio, mu_ratio_p1_p99,
     qc_mean (area-weighted) and qc_max, and with flips ``flips_folded`` (``folded_flips``). ``V``
     (n,3), ``F`` (m,3), ``UV`` (n,2). With ``squash_limit`` (an s1/s2) also ``squashed``: how many
-    triangles the map shears past it (``squashed_faces``)."""
+    triangles the map shears past it (``squashed_faces``; 0 without a look when ``qc_max`` is not
+    above it)."""
     J, A = jacobians(V, F, UV)
     rep = measures_from_jacobians(J, A)[0]
     if squash_limit is not None:
-        rep['squashed'] = int(squashed_faces(singular_values(J), shape_anisotropy(V, F), squash_limit).sum())
+        rep['squashed'] = 0 if rep['qc_max'] <= squash_limit else \
+            int(squashed_faces(singular_values(J), shape_anisotropy(V, F), squash_limit).sum())
     if rep['flips']:
         rep['flips_folded'] = folded_flips(V, F, J)
     return rep
