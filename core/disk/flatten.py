@@ -27,8 +27,7 @@ from ..errors import ConformalError
 from ..mesh.geometry import angle_sums, face_areas, folded_faces
 from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import (SQUASHED_QC, folded_flips, flip_warning, jacobians_from_frames, local_frames,
-                             measures_from_jacobians, shape_anisotropy, signed_uv_areas, singular_values,
-                             squashed_faces)
+                             measures_from_jacobians, signed_uv_areas, squashed_count)
 from ..mesh.intrinsic import intrinsic_delaunay
 from ..mesh.solve import Factor, FactorJob, factor_all, fill_order, sub_order
 from .lscm import lscm
@@ -522,8 +521,7 @@ def _measured(report, uv, u, F, mask, A, jacobians, fit, unit, warnings, timings
         report['flips_folded'] = folded_flips(V, F, J, mask)
     if V is not None and not measured['qc_max'] <= SQUASHED_QC:
         # triangles squashed nearly flat (a defect like a flip; the mesh's own needles left out)
-        sv = singular_values(J if mask is None else J[mask])
-        report['squashed'] = int(squashed_faces(sv, shape_anisotropy(V, Fm), SQUASHED_QC).sum())
+        report['squashed'] = squashed_count(V, Fm, J if mask is None else J[mask], measured['qc_max'])
     if u is not None:
         used = np.unique(Fm)
         report['vertex_ratio'] = float(np.exp(u[used].min() - u[used].max()))

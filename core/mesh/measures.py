@@ -75,6 +75,14 @@ def squashed_faces(sv, anisotropy, limit):
     return (sv[:, 1] * limit <= sv[:, 0]) & (anisotropy < limit)
 
 
+def squashed_count(V, F, J, qc_max, limit=SQUASHED_QC):
+    """How many triangles of ``V`` (n,3), ``F`` (m,3) the map with Jacobians ``J`` (m,2,2) squashes
+    (``squashed_faces`` at ``limit``); 0 without a look when the map's ``qc_max`` is not above it."""
+    if qc_max <= limit:
+        return 0
+    return int(squashed_faces(singular_values(J), shape_anisotropy(V, F), limit).sum())
+
+
 def determinants(J):
     """Determinants (m,) of 2x2 matrices J (m,2,2)."""
     return J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
@@ -121,13 +129,11 @@ def uv_measures(V, F, UV, squash_limit=None):
     """docs/math.md §3 measures of a UV map: dict with faces, flips, mu_ratio, mu_ratio_p1_p99,
     qc_mean (area-weighted) and qc_max, and with flips ``flips_folded`` (``folded_flips``). ``V``
     (n,3), ``F`` (m,3), ``UV`` (n,2). With ``squash_limit`` (an s1/s2) also ``squashed``: how many
-    triangles the map shears past it (``squashed_faces``; 0 without a look when ``qc_max`` is not
-    above it)."""
+    triangles the map shears past it (``squashed_count``)."""
     J, A = jacobians(V, F, UV)
     rep = measures_from_jacobians(J, A)[0]
     if squash_limit is not None:
-        rep['squashed'] = 0 if rep['qc_max'] <= squash_limit else \
-            int(squashed_faces(singular_values(J), shape_anisotropy(V, F), squash_limit).sum())
+        rep['squashed'] = squashed_count(V, F, J, rep['qc_max'], squash_limit)
     if rep['flips']:
         rep['flips_folded'] = folded_flips(V, F, J)
     return rep
