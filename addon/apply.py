@@ -202,6 +202,7 @@ def finish(job, res, uv_name: str, packer: str, pack_note: str | None, colormap:
         'repairs': core.get('repairs', []),
         'cones': len(res.result.cones) if auto else None,
         'seam_fraction': core.get('seam_fraction') if auto else None,
+        'feature_edges': core.get('feature_edges') if auto else None,
         'holes_filled': core['holes_filled'], 'holes_cut': core['holes_cut'],
         'relative_scale': 'true' if (opts.keep_relative_scale or core['islands'] == 1) else 'normalised',
         'packer': packer, 'pack_note': pack_note,

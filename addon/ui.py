@@ -27,7 +27,8 @@ FLATTEN_ROWS = [
     ("Flips", 'flips'),
     ("Qc mean", lambda r: _fmt(r.get('qc_mean'), '.4f')),
     ("Cones", lambda r: "-" if r.get('cones') is None else
-        f"{r['cones']} (seams {100 * (r.get('seam_fraction') or 0):.1f}% of edge length)"),
+        f"{r['cones']} (seams {100 * (r.get('seam_fraction') or 0):.1f}% of edge length"
+        + (f", {r['feature_edges']} on feature curves)" if r.get('feature_edges') else ")")),
     ("Mu range", lambda r: "-" if not r.get('conformal_factor_range') else
         "{:.3g} - {:.3g}".format(*r['conformal_factor_range'])),
     ("Time", lambda r: f"{r['seconds']['total']:.2f} s" if r.get('seconds') else "-"),

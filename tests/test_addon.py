@@ -539,6 +539,30 @@ def test_auto_seams_unfold_the_default_cube_into_a_net(addon, bl):
     assert uv.min() >= -1e-6 and uv.max() <= 1 + 1e-6
 
 
+def test_auto_seams_unroll_the_default_cylinder(addon, bl):
+    """Blender's default cylinder (32 sides, n-gon caps) with seams='AUTO': its curvature sits on its
+    two rims, which cones could not hold (8 cones, 1%/99% ratio 0.44, qc_mean 1.31, two warnings).
+    Now the rims are its seams: two caps and the side unrolled, no cone, every loop triangle at one
+    scale, no warning."""
+    bpy.ops.mesh.primitive_cylinder_add()
+    me = bpy.context.object.data
+    assert bpy.ops.uv.conformal_flatten(seams='AUTO', cones=0) == {'FINISHED'}
+    report = json.loads(me['conformal_flatten_report'])
+    assert report['feature_edges'] == 64 and report['cones'] == 0 and report['flips'] == 0
+    assert not report.get('warnings')
+    assert sum(e.use_seam for e in me.edges) >= 64
+    uv = np.zeros(2 * len(me.loops), np.float32)
+    me.uv_layers.active.uv.foreach_get('vector', uv)
+    uv = uv.reshape(-1, 2).astype(np.float64)
+    co = np.array([v.co[:] for v in me.vertices], np.float64)
+    me.calc_loop_triangles()
+    lt = np.array([t.loops[:] for t in me.loop_triangles])
+    vt = np.array([t.vertices[:] for t in me.loop_triangles])
+    ratio = (np.linalg.norm(uv[lt] - uv[np.roll(lt, 1, axis=1)], axis=2)
+             / np.linalg.norm(co[vt] - co[np.roll(vt, 1, axis=1)], axis=2))
+    assert ratio.max() < ratio.min() * (1 + 1e-4), (ratio.min(), ratio.max())
+
+
 def test_auto_seams_keep_to_polygon_edges(addon, bl):
     """A cube with a Bevel modifier applied (quads, n-gon-free rounded edges) and seams='AUTO': the
     automatic cuts keep off the quads' diagonals, so every polygon's corners hold the map (a seam

@@ -247,7 +247,7 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         if zero.any():                          # kept: cone_unwrap mollifies them, as islands do
             fixed.repairs.append(zero_area_note(int(zero.sum())))
         poly_s = None if tri_poly is None else tri_poly[sel]
-        uv_r, isl_r, islands, seams_r, cone_r = cone_layout(
+        uv_r, isl_r, islands, seams_r, cone_r, n_feature = cone_layout(
             fixed.V, fixed.F, cones=cones, target_ratio=target_ratio, max_cones=max_cones, fit=fit,
             pack=pack, margin=margin, progress=progress,
             poly=None if poly_s is None else poly_s[fixed.face_map])
@@ -274,7 +274,7 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         summary = {'islands': len(islands), 'flattened': len(islands), 'failed': 0, 'holes_filled': 0,
                    'holes_cut': 0, 'packed': bool(pack and len(islands) > 1), 'pack_efficiency': None,
                    'bound_vertex': None, 'vertex_ratio': None, 'cones': len(cone_list),
-                   'seam_edges': int(len(auto_seams)),
+                   'seam_edges': int(len(auto_seams)), 'feature_edges': int(n_feature),
                    'seam_length': float(sum(r['seam_length'] for r in islands)),
                    'seam_fraction': _seam_fraction(V, F, auto_seams), 'repairs': fixed.repairs,
                    **{k: meas[k] for k in MEASURE_KEYS}}
@@ -576,22 +576,27 @@ def _repeated_part(repeats, V, F, poly):
 
 def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int = 48,
                 fit: str = 'unit_square', pack: bool = True, margin: float = 0.01,
-                progress: Callable[[float, str], None] | None = None, poly=None):
-    """Automatic seams from cone singularities, part by part (docs/math.md §9).
+                progress: Callable[[float, str], None] | None = None, poly=None, features: bool = True):
+    """Automatic seams from cone singularities, part by part (docs/math.md §9), and with ``features``
+    (``cones='auto'`` only) along a part's feature curves (``_feature_part``).
 
     ``V`` (n,3), ``F`` (m,3): a manifold mesh (one or several connected parts, closed or open, any
     genus). cones: 'auto' (the fewest cones reaching ``target_ratio`` for the 1%/99% scale ratio, at
     most ``max_cones``) or a cone budget per part (int). ``poly`` (m,) optional: the polygon of each
     triangle; the cuts keep off the polygons' diagonals where they can (a seam through a polygon
     would give one of its corners two UVs). Returns (uv_corner (m,3,2), face_island (m,), islands
-    (list of report dicts), seams (k,2), cones (list of (vertex, kappa)))."""
+    (list of report dicts), seams (k,2), cones (list of (vertex, kappa)), feature_edges: how many of
+    the seams are feature curves). A part cut along its feature curves can give several islands."""
     from .cones import flat_part
+    from .features import feature_curves
     from .unfold import FLAT_TREE_MAX, unfold_flat_disk
     report_progress = progress or (lambda f, msg: None)
     n, m = len(V), len(F)
     n_parts, part = topology.face_components(F, n)
     uv_corner = np.full((m, 3, 2), np.nan)
+    face_island = np.zeros(m, np.int64)
     islands, seams, cone_list, boxes = [], [], [], []
+    n_feature = 0
     repeats = Repeats()                     # parts of one shape (an array modifier's copies) placed once
     inner = None if poly is None else polygon_sides(F, n, np.asarray(poly))
     a_total = float(face_areas(V, F).sum())
@@ -600,32 +605,49 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
         tris = np.nonzero(part == p)[0]
         used, Fp = np.unique(F[tris], return_inverse=True)
         Fp = Fp.reshape(-1, 3)
+        Vp, poly_p = V[used], None if poly is None else poly[tris]
         share = len(tris) / m
         sub = (lambda f, msg, b=done, w=share: report_progress(0.05 + 0.85 * (b + w * f), msg))
-        flat = None if len(Fp) > FLAT_TREE_MAX or degenerate_faces(V[used], Fp).any() else \
-            unfold_flat_disk(V[used], Fp)
-        if flat is not None:                  # no interior vertex (a card, a soup's triangle): no cone
-            res = flat_part(V[used], Fp, flat, target_ratio)
-        elif (res := _repeated_part(repeats, V[used], Fp, None if inner is None else poly[tris])) is None:
+
+        def plain(tris=tris, Vp=Vp, Fp=Fp, poly_p=poly_p, sub=sub, p=p):
+            """The part's ``ConeResult`` without feature curves."""
+            flat = None if len(Fp) > FLAT_TREE_MAX or degenerate_faces(Vp, Fp).any() else \
+                unfold_flat_disk(Vp, Fp)
+            if flat is not None:              # no interior vertex (a card, a soup's triangle): no cone
+                return flat_part(Vp, Fp, flat, target_ratio)
+            if (res := _repeated_part(repeats, Vp, Fp, None if inner is None else poly_p)) is not None:
+                return res
             try:
-                res = _cone_part(V[used], Fp, cones, target_ratio, max_cones, sub,
+                res = _cone_part(Vp, Fp, cones, target_ratio, max_cones, sub,
                                  None if inner is None else inner[tris])
             except ConformalError as exc:
                 if n_parts == 1 or exc.problem.startswith('part '):
                     raise
                 raise exc.with_context(f"part {p + 1} of {n_parts} ({len(tris)} triangles)") from None
             if n_parts > 1:
-                _keep_part(repeats, V[used], Fp, None if inner is None else poly[tris], res, f"part {p + 1}")
+                _keep_part(repeats, Vp, Fp, None if inner is None else poly_p, res, f"part {p + 1}")
+            return res
+
+        curves = feature_curves(Vp, Fp, poly_p) if features and cones == 'auto' else ()
+        if len(curves):
+            uv_p, isl_p, reps, seams_p, cones_p, nf = _feature_part(
+                Vp, Fp, curves, plain, dict(target_ratio=target_ratio, max_cones=max_cones, margin=margin,
+                                            progress=sub, poly=poly_p))
+        else:
+            uv_p, isl_p, reps, seams_p, cones_p, nf = _one_island(plain())
         done += share
-        r = dict(res.report)
-        r.update({'island': p + 1, 'triangles': int(len(tris)),
-                  'area_3d': float(face_areas(V[used], Fp).sum())})
-        islands.append(r)
-        uv_corner[tris] = res.uv
-        if len(res.seams):
-            seams.append(used[res.seams])
-        cone_list += [(int(used[c]), float(k)) for c, k in zip(res.cones, res.kappa)]
-        W = res.uv.reshape(-1, 2)
+        area = face_areas(Vp, Fp)
+        for j, r in enumerate(reps):
+            r.update({'island': len(islands) + j + 1, 'triangles': int((isl_p == j).sum()),
+                      'area_3d': float(area[isl_p == j].sum())})
+        face_island[tris] = len(islands) + isl_p
+        islands += reps
+        n_feature += nf
+        uv_corner[tris] = uv_p
+        if len(seams_p):
+            seams.append(used[seams_p])
+        cone_list += [(int(used[c]), float(k)) for c, k in cones_p]
+        W = uv_p.reshape(-1, 2)
         lo = W.min(0)
         uv_corner[tris] -= lo
         boxes.append(W.max(0) - lo)
@@ -642,4 +664,45 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
     seams = np.concatenate(seams) if seams else np.zeros((0, 2), np.int64)
     for r in islands:
         r['area_fraction'] = r['area_3d'] / a_total if a_total > 0 else 0.0
-    return uv_corner, part.astype(np.int64), islands, seams, cone_list
+    return uv_corner, face_island, islands, seams, cone_list, n_feature
+
+
+def _feature_part(V, F, curves, plain, kw):
+    """One connected part ``V`` (n,3), ``F`` (m,3) cut along its feature ``curves`` (k,2) and laid out
+    by ``cone_layout`` (``cones='auto'``, its pieces packed at one scale): each side of a curve is a
+    boundary, where the curvature its vertices hold costs nothing. That layout is kept if it is clean
+    (no flip, overlap or squashed triangle), conformal (every island's qc_mean at most
+    ``cones.QC_WARN``) and on target (every island and the whole part at ``target_ratio`` or more).
+    Otherwise ``plain()`` (the part's ``ConeResult`` without the cut) runs too, and the better of the
+    two is kept: fewer defects, then conformal, then the higher p1/p99 (the worse of every island's
+    and the whole part's). ``kw``: ``cone_layout``'s target_ratio, max_cones, margin, progress and
+    poly. Returns (uv (m,3,2), island (m,) of each triangle, island reports, seams (s,2), cones
+    (list of (vertex, kappa)), feature edges among the seams)."""
+    from .cones import QC_WARN, realised_spread
+    from .cut import cut_along_seams
+    cut = cut_along_seams(F, len(V), curves)
+    uv, isl, reps, seams, cone_list, _ = cone_layout(V[cut.vert_of], cut.F, cones='auto', fit='true_scale',
+                                                     pack=True, features=False, **kw)
+    seams = np.r_[np.sort(curves, axis=1), np.sort(cut.vert_of[seams], axis=1) if len(seams) else seams]
+    got = (uv, isl, reps, np.unique(seams, axis=0), [(int(cut.vert_of[v]), k) for v, k in cone_list],
+           len(curves))
+
+    def key(layout):
+        reps = layout[2]
+        defects = sum(r['flips'] + r['overlaps'] + r.get('degenerate', 0) + r.get('seams_inside_polygons', 0)
+                      for r in reps)
+        spread = min(min(realised_spread(r) for r in reps), _measure(V, F, layout[0])[0]['mu_ratio_p1_p99'])
+        return defects == 0, -defects, max(r['qc_mean'] for r in reps) <= QC_WARN, spread
+
+    k = key(got)
+    if k[0] and k[2] and k[3] >= kw['target_ratio']:
+        return got
+    other = _one_island(plain())
+    return got if k >= key(other) else other
+
+
+def _one_island(res):
+    """A part's ``ConeResult`` ``res`` as ``_feature_part`` returns its layouts: one island, no feature
+    curve."""
+    return (res.uv, np.zeros(len(res.uv), np.int64), [dict(res.report)], res.seams,
+            list(zip(res.cones, res.kappa)), 0)

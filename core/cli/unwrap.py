@@ -157,6 +157,9 @@ def run(args):
               f"{r['holes_filled']}, cut {r['holes_cut']}: flips {r['flips']}, overlaps {r['overlaps']}, "
               f"qc_mean {r['qc_mean']:.4f} (worst island {r['qc_mean_worst']:.4f}), mu_ratio "
               f"{r['mu_ratio']:.4f} (worst island {r['mu_ratio_worst']:.4f}), {r['seconds']:.2f} s")
+        if args.cones is not None:
+            print(f"{r['cones']} cone(s), {r['seam_edges']} seam edges ({100 * r['seam_fraction']:.1f}% "
+                  f"of the edge length, {r['feature_edges']} on feature curves): {r['seams_file']}")
     for rp in r.get('repairs', []):
         print(f"repaired: {rp['repair']} ({rp['count']}): {rp['note']}", file=sys.stderr)
     for w in res.warnings:
