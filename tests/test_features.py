@@ -82,3 +82,21 @@ def test_a_boolean_boss_is_cut_along_its_rims_and_laid_out_flat():
     assert r['mu_ratio_p1_p99'] > 0.999 and r['qc_mean'] < 1.001
     assert res.report['split_polygons'] == 0 == split_polygons(F, poly, res.uv_corner)
     assert not res.warnings
+
+
+def test_copies_of_a_part_cut_along_its_feature_curves_are_laid_out_once():
+    """Three copies of the Boolean boss (an Array modifier's; the last mirrored): the first is cut
+    along its rims and laid out, the others take its islands, seams and cones (``repeat_of``), the
+    mirror image reflected: every triangle at one scale, none flipped."""
+    from core.io.obj import read_obj
+    from core.mesh.triangulate import triangulate
+    mesh = read_obj(os.path.join(DATA, 'bool_boss.obj'))
+    tc, poly = triangulate(mesh.corner_verts, mesh.sizes, mesh.V)
+    F0, n = mesh.corner_verts[tc], len(mesh.V)
+    V = np.concatenate([mesh.V, mesh.V + [5.0, 0.0, 0.0], mesh.V * [-1, 1, 1] + [10.0, 0.0, 0.0]])
+    F = np.concatenate([F0, F0 + n, F0[:, ::-1] + 2 * n])
+    res = unwrap(V, F, tri_poly=np.r_[poly, poly + 1000, poly + 2000], cones='auto')
+    r = res.report
+    assert r['islands'] == 9 and r['feature_edges'] == 3 * 96 and r['flips'] == 0 and not res.warnings
+    assert sum('repeat_of' in i for i in res.islands) == 6
+    assert np.nanmax(res.mu) < np.nanmin(res.mu) * (1 + 1e-6)

@@ -540,38 +540,40 @@ def split_polygons(F, tri_poly, uv_corner):
     return int(len(np.unique(np.concatenate(polys))))
 
 
-def _keep_part(repeats, V, F, poly, res, desc):
-    """Keep the ``ConeResult`` ``res`` of the part ``V`` (n,3), ``F`` (m,3) with polygons ``poly`` (m,)
-    or None in ``repeats`` (``Repeats``) as one piece whose vertices are the triangles' corners, with
-    the cones and seams in its report."""
+def _keep_part(repeats, V, F, poly, out, desc):
+    """Keep the layout ``out`` (as ``_feature_part`` returns it) of the part ``V`` (n,3), ``F`` (m,3)
+    with polygons ``poly`` (m,) or None in ``repeats`` (``Repeats``) as one piece whose vertices are the
+    triangles' corners, with its islands, cones and seams in the piece's report."""
     m = len(F)
-    extra = {'report': res.report, 'seams': res.seams, 'cones': res.cones, 'kappa': res.kappa, 'u': res.u,
-             'corner_vertex': F.ravel()}
+    uv, isl, reps, seams, cones, nf = out
+    extra = {'isl': isl, 'reports': reps, 'seams': seams, 'nf': nf, 'corner_vertex': F.ravel(),
+             'cones': np.array([c for c, _ in cones], np.int64), 'kappa': np.array([k for _, k in cones])}
     repeats.add(V, F, poly, desc, [(np.arange(m), np.arange(3 * m).reshape(m, 3), F.ravel(),
-                                    res.uv.reshape(-1, 2), extra)])
+                                    uv.reshape(-1, 2), extra)])
 
 
 def _repeated_part(repeats, V, F, poly):
-    """The ``ConeResult`` of an earlier part of which the part ``V`` (n,3), ``F`` (m,3), ``poly`` (m,) or
-    None is a copy (up to a rotation and a translation, or a reflection: ``Repeats.find``), carried
-    onto this part's vertices and corners, or None. A copy has the same edge lengths, so the same
-    cones and the same layout (a mirror image's reflected); its report says which part it repeats."""
-    from .cones import ConeResult
+    """The layout (as ``_feature_part`` returns it) of an earlier part of which the part ``V`` (n,3),
+    ``F`` (m,3), ``poly`` (m,) or None is a copy (up to a rotation and a translation, or a reflection:
+    ``Repeats.find``), carried onto this part's vertices and corners, or None. A copy has the same edge
+    lengths, so the same cones, seams and layout (a mirror image's reflected); its reports say which
+    part it repeats."""
     same = repeats.find(V, F, poly)
     if same is None:
         return None
     desc, [(mine, Fc, new_vertex, uv, extra)] = same
     uv_corner = np.empty((len(F), 3, 2))
     uv_corner[mine] = uv[Fc]
+    isl = np.empty(len(F), np.int64)
+    isl[mine] = extra['isl']
     vertex = np.empty(len(V), np.int64)              # this part's vertex of each vertex of the original
     vertex[extra['corner_vertex']] = new_vertex
     seams = np.sort(vertex[extra['seams']], axis=1) if len(extra['seams']) else extra['seams']
-    rep = extra['report']
-    rep['repeat_of'], rep['seconds'] = desc, {'total': 0.0}
-    u = np.empty(len(V))
-    u[vertex] = extra['u']
-    return ConeResult(uv=uv_corner, seams=seams, cones=vertex[extra['cones']], kappa=extra['kappa'], u=u,
-                      report=rep)
+    reps = extra['reports']
+    for rep in reps:
+        rep['repeat_of'], rep['seconds'] = desc, {'total': 0.0}
+    return (uv_corner, isl, reps, seams, list(zip(vertex[extra['cones']].tolist(), extra['kappa'].tolist())),
+            extra['nf'])
 
 
 def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int = 48,
@@ -609,32 +611,28 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
         share = len(tris) / m
         sub = (lambda f, msg, b=done, w=share: report_progress(0.05 + 0.85 * (b + w * f), msg))
 
-        def plain(tris=tris, Vp=Vp, Fp=Fp, poly_p=poly_p, sub=sub, p=p):
+        def plain(tris=tris, Vp=Vp, Fp=Fp, sub=sub, p=p):
             """The part's ``ConeResult`` without feature curves."""
-            flat = None if len(Fp) > FLAT_TREE_MAX or degenerate_faces(Vp, Fp).any() else \
-                unfold_flat_disk(Vp, Fp)
-            if flat is not None:              # no interior vertex (a card, a soup's triangle): no cone
-                return flat_part(Vp, Fp, flat, target_ratio)
-            if (res := _repeated_part(repeats, Vp, Fp, None if inner is None else poly_p)) is not None:
-                return res
             try:
-                res = _cone_part(Vp, Fp, cones, target_ratio, max_cones, sub,
-                                 None if inner is None else inner[tris])
+                return _cone_part(Vp, Fp, cones, target_ratio, max_cones, sub,
+                                  None if inner is None else inner[tris])
             except ConformalError as exc:
                 if n_parts == 1 or exc.problem.startswith('part '):
                     raise
                 raise exc.with_context(f"part {p + 1} of {n_parts} ({len(tris)} triangles)") from None
-            if n_parts > 1:
-                _keep_part(repeats, Vp, Fp, None if inner is None else poly_p, res, f"part {p + 1}")
-            return res
 
-        curves = feature_curves(Vp, Fp, poly_p) if features and cones == 'auto' else ()
-        if len(curves):
-            uv_p, isl_p, reps, seams_p, cones_p, nf = _feature_part(
-                Vp, Fp, curves, plain, dict(target_ratio=target_ratio, max_cones=max_cones, margin=margin,
-                                            progress=sub, poly=poly_p))
-        else:
-            uv_p, isl_p, reps, seams_p, cones_p, nf = _one_island(plain())
+        flat = None if len(Fp) > FLAT_TREE_MAX or degenerate_faces(Vp, Fp).any() else \
+            unfold_flat_disk(Vp, Fp)
+        if flat is not None:                  # no interior vertex (a card, a soup's triangle): no cone
+            out = _one_island(flat_part(Vp, Fp, flat, target_ratio))
+        elif (out := _repeated_part(repeats, Vp, Fp, None if inner is None else poly_p)) is None:
+            curves = feature_curves(Vp, Fp, poly_p) if features and cones == 'auto' else ()
+            out = _feature_part(Vp, Fp, curves, plain, dict(target_ratio=target_ratio, max_cones=max_cones,
+                                                            margin=margin, progress=sub, poly=poly_p)) \
+                if len(curves) else _one_island(plain())
+            if n_parts > 1:
+                _keep_part(repeats, Vp, Fp, None if inner is None else poly_p, out, f"part {p + 1}")
+        uv_p, isl_p, reps, seams_p, cones_p, nf = out
         done += share
         area = face_areas(Vp, Fp)
         for j, r in enumerate(reps):
