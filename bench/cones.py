@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/cones.py [--meshes spot cheburashka cow rocker-arm] [--budgets 4 8 12 16 24]
                                     [--no-anchor] [--no-xatlas] [--no-auto] [--big] [--acceptance]
-                                    [--cuts [spot cow cheburashka]] [--cut-subdivisions 2]
+                                    [--cuts [spot cow cheburashka]] [--cut-subdivisions 2] [--features]
 
 Rows per mesh: ``cone_unwrap`` with exactly N cones (``target_ratio=None, max_cones=N``) and 'auto'
 (``target_ratio=0.5``); the BFF-style greedy anchor (a cone at the vertex of largest |u| with u equal
@@ -24,6 +24,11 @@ for the held-out scans, which are not used here.
 
 ``--acceptance``: only the MovingCones rows (spot 16 and 41 cones, cheburashka 24 and 53, rocker-arm 8
 and 18), placed and laid out by ``cone_unwrap``, beside the published figure.
+
+``--features``: machined parts (tests/data/bool_boss.obj and bool_bracket.obj, ``meshgen``'s capped
+cylinders, and Blender's cylinder and cone where ``bpy`` imports) laid out by ``cone_layout`` with
+and without their feature curves (docs/cones.md, "Thirtieth round"): islands, cones, feature edges,
+p1/p99 per triangle, qc_mean, flips and seconds.
 
 ``--big``: the speed target, auto cones plus flattening on ~100k-triangle meshes (spot subdivided
 twice; a blob), with wall and CPU time, stage times and peak memory (``--big-extra``: also
@@ -287,6 +292,60 @@ def big(extra=False):
               f"{peak:.0f} | {os.getloadavg()[0]:.1f} |", flush=True)
 
 
+def feature_cases():
+    """(name, V, F, poly or None) of the machined parts of ``--features``."""
+    from core.mesh.triangulate import triangulate
+    sys.path.insert(0, os.path.join(ROOT, 'tests'))
+    from meshgen import capped_cylinder
+    cases = []
+    for name in ('bool_boss', 'bool_bracket'):
+        mesh = read_obj(os.path.join(ROOT, 'tests', 'data', name + '.obj'))
+        tc, poly = triangulate(mesh.corner_verts, mesh.sizes, mesh.V)
+        cases.append((name, mesh.V, mesh.corner_verts[tc], poly))
+    cases += [('capped_cylinder 48x12', *capped_cylinder(48, 12), None),
+              ('capped_cylinder 64x20', *capped_cylinder(64, 20), None)]
+    try:
+        import bpy
+    except ImportError:
+        print("(bpy is missing: Blender's primitives are left out)")
+        return cases
+    for name, add in (('Blender cylinder', bpy.ops.mesh.primitive_cylinder_add),
+                      ('Blender cone', bpy.ops.mesh.primitive_cone_add)):
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        add()
+        me = bpy.context.object.data
+        V = np.array([v.co[:] for v in me.vertices], np.float64)
+        cv = np.array([lp.vertex_index for lp in me.loops], np.int64)
+        sizes = np.array([p.loop_total for p in me.polygons], np.int64)
+        tc, poly = triangulate(cv, sizes, V)
+        cases.append((name, V, cv[tc], poly))
+    return cases
+
+
+def feature_rows():
+    """``--features``: each machined part through ``cone_layout`` (after the same repair as
+    ``core.unwrap``) without and with its feature curves."""
+    from core.atlas.unwrap import cone_layout
+    from core.mesh.repair import repair_merged
+    from core.mesh.validate import degenerate_faces
+    print("| part | triangles | feature curves | islands | cones | feature edges | p1/p99 | qc_mean | flips "
+          "| s |")
+    print('|---' * 10 + '|')
+    for name, V, F, poly in feature_cases():
+        fixed, _ = repair_merged(V, F)
+        pf = None if poly is None else poly[fixed.face_map]
+        for feat in (False, True):
+            t = time.perf_counter()
+            uv, _, reps, _, cones, nf = cone_layout(fixed.V, fixed.F, poly=pf, features=feat)
+            t = time.perf_counter() - t
+            good = ~degenerate_faces(fixed.V, fixed.F)        # the repair's collapsed triangles left out
+            m = int(good.sum())
+            r = uv_measures(fixed.V[fixed.F[good]].reshape(-1, 3), np.arange(3 * m).reshape(m, 3),
+                            uv[good].reshape(-1, 2))
+            print(f"| {name} | {m} | {'yes' if feat else 'no'} | {len(reps)} | {len(cones)} | {nf} "
+                  f"| {r['mu_ratio_p1_p99']:.3f} | {r['qc_mean']:.3f} | {r['flips']} | {t:.2f} |", flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--meshes', nargs='+', default=['spot', 'cheburashka', 'cow', 'rocker-arm'])
@@ -306,8 +365,12 @@ def main():
     ap.add_argument('--corpus', nargs='*', default=None,
                     help='the rows of the other corpus meshes and the generated surfaces through '
                          'core.unwrap (names; none given: all of CORPUS_REST and SURFACES)')
+    ap.add_argument('--features', action='store_true',
+                    help='machined parts with and without their feature curves (docs/cones.md)')
     a = ap.parse_args()
-    if a.big:
+    if a.features:
+        feature_rows()
+    elif a.big:
         big(a.big_extra)
     elif a.cuts is not None:
         budgets = a.budgets if a.budgets != ap.get_default('budgets') else [7, 9, 10]

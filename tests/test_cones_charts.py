@@ -61,3 +61,40 @@ def test_merge_keeps_a_layout_without_overlap_in_one_piece():
     new, uv2, seams2 = merge_charts(F, n, cut, uv[cut.vert_of], seams, np.zeros((0, 2), np.int64))
     assert new.n_islands == 1 and len(seams2) == 0
     assert np.allclose(uv2[new.F], uv[F])
+
+
+def flat_annulus(segments=32):
+    """A flat square plate (side 2) with a round hole (radius 0.5, ``segments`` sides), Delaunay
+    triangulated: ``V`` (n,3) on z = 0, ``F`` (m,3) counter-clockwise."""
+    from scipy.spatial import Delaunay
+    th = 2 * np.pi * np.arange(segments) / segments
+    s = np.linspace(-1, 1, 9)[:-1]
+    P = np.r_[np.c_[0.5 * np.cos(th), 0.5 * np.sin(th)],
+              np.c_[s, -np.ones(8)], np.c_[np.ones(8), s], np.c_[-s, np.ones(8)], np.c_[-np.ones(8), -s]]
+    F = Delaunay(P).simplices
+    F = F[np.linalg.norm(P[F].mean(1), axis=1) > 0.5]
+    e1, e2 = P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]]
+    back = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] < 0
+    F[back] = F[back][:, ::-1]
+    return np.c_[P, np.zeros(len(P))], F
+
+
+def test_a_flat_annulus_closes_up_in_one_chart():
+    """A flat plate with a hole needs one cut from its rim to the hole, and its isometric layout closes
+    up on it: the cut's two copies lie on one line up to rounding. They touch but do not cross, and
+    ``boundary_crossings`` took their rounding for crossings, so the layout was split into two charts
+    (through a polygon, where the plate is n-gons). Now: one chart, no split, every edge kept. Two
+    segments a millionth of a radian apart still cross."""
+    from core.atlas.cones import cone_unwrap
+    from core.atlas.cut import boundary_crossings
+    V, F = flat_annulus()
+    res = cone_unwrap(V, F, target_ratio=0.5)
+    r = res.report
+    assert r['charts'] == 1 and r['chart_splits'] == 0 and r['overlaps'] == 0 and r['flips'] == 0
+    e3 = np.linalg.norm(V[F] - V[np.roll(F, 1, axis=1)], axis=2)
+    e2 = np.linalg.norm(res.uv - np.roll(res.uv, 1, axis=1), axis=2)
+    assert np.abs(e2 / e3 - 1).max() < 1e-9
+    # two loops sharing a side up to rounding touch; tilted by a millionth of a radian they cross
+    for eps, crosses in ((1e-16, False), (1e-6, True)):
+        uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, -5.0], [0.9, eps], [0.1, -eps], [0.5, 5.0]])
+        assert (boundary_crossings(uv, [np.arange(3), np.arange(3, 6)]) > 0) == crosses

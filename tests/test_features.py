@@ -82,6 +82,14 @@ def test_a_boolean_boss_is_cut_along_its_rims_and_laid_out_flat():
     assert r['mu_ratio_p1_p99'] > 0.999 and r['qc_mean'] < 1.001
     assert res.report['split_polygons'] == 0 == split_polygons(F, poly, res.uv_corner)
     assert not res.warnings
+    # the boss and the block's top face selected: that face, an n-gon plate with a hole once the
+    # foot is cut, closes up on its cut, which used to count as an overlap and split a polygon
+    top = np.all(mesh.V[F][:, :, 2] > 0.5 - 1e-6, axis=1)
+    res = unwrap(mesh.V, F, tri_poly=poly, cones='auto', faces=top)
+    r = res.report
+    assert r['feature_edges'] == 96 and r['flips'] == 0 and r['overlaps'] == 0 and not res.warnings
+    assert r['mu_ratio_p1_p99'] > 0.999 and r['qc_mean'] < 1.001 and r['split_polygons'] == 0
+    assert np.isnan(res.uv_corner[~top]).all()
 
 
 def test_copies_of_a_part_cut_along_its_feature_curves_are_laid_out_once():

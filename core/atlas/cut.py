@@ -165,6 +165,9 @@ def glued_pieces(F, Fs, island, seams, n):
     return piece, n_pieces, glued, joined
 
 
+COLLINEAR = 1e-10    # ``boundary_crossings``: sin of the angle under which three points count as collinear
+
+
 def boundary_crossings(uv, loops, return_segments=False):
     """Number of pairs of boundary segments that cross each other in the UV plane. ``uv`` (n,2),
     ``loops`` list of (k,) vertex loops. Together with zero flipped triangles, zero crossings means
@@ -182,7 +185,12 @@ def boundary_crossings(uv, loops, return_segments=False):
     lo_x, hi_x, lo_y, hi_y = lo_x[order], hi_x[order], lo_y[order], hi_y[order]
 
     def orient(p, q, r):
-        return np.sign((q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0]))
+        # 0 within COLLINEAR of a straight angle: the two copies of a cut that a layout closes up on (a
+        # flat annulus laid out isometrically) lie on one line up to rounding, and meet the boundary
+        # at one point: they touch, they do not cross
+        d1, d2 = q - p, r - p
+        x = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+        return np.where(np.abs(x) <= COLLINEAR * np.hypot(*d1.T) * np.hypot(*d2.T), 0.0, np.sign(x))
 
     count = 0
     hits = []
