@@ -108,3 +108,23 @@ def test_copies_of_a_part_cut_along_its_feature_curves_are_laid_out_once():
     assert r['islands'] == 9 and r['feature_edges'] == 3 * 96 and r['flips'] == 0 and not res.warnings
     assert sum('repeat_of' in i for i in res.islands) == 6
     assert np.nanmax(res.mu) < np.nanmin(res.mu) * (1 + 1e-6)
+
+
+def test_a_part_whose_pieces_have_no_layout_is_laid_out_whole(monkeypatch):
+    """If a piece cut off along the feature curves has no layout (``ConformalError``), the part is laid
+    out whole, as without feature curves, instead of failing."""
+    import core.atlas.unwrap as unwrap_module
+    from core.errors import ConformalError
+    real = unwrap_module.cone_layout
+
+    def pieces_fail(*args, **kw):
+        if kw.get('features') is False:
+            raise ConformalError("no layout of the cut disk could be built", 'solve_failed')
+        return real(*args, **kw)
+
+    monkeypatch.setattr(unwrap_module, 'cone_layout', pieces_fail)
+    V, F = meshgen.capped_cylinder(16, 4)
+    res = unwrap(V, F, cones='auto')
+    r = res.report
+    assert r['feature_edges'] == 0 and r['islands'] == 1 and r['cones'] > 0 and r['flips'] == 0
+    assert np.isfinite(res.uv_corner).all()

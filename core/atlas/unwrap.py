@@ -673,14 +673,18 @@ def _feature_part(V, F, curves, plain, kw):
     ``cones.QC_WARN``) and on target (every island and the whole part at ``target_ratio`` or more).
     Otherwise ``plain()`` (the part's ``ConeResult`` without the cut) runs too, and the better of the
     two is kept: fewer defects, then conformal, then the higher p1/p99 (the worse of every island's
-    and the whole part's). ``kw``: ``cone_layout``'s target_ratio, max_cones, margin, progress and
-    poly. Returns (uv (m,3,2), island (m,) of each triangle, island reports, seams (s,2), cones
-    (list of (vertex, kappa)), feature edges among the seams)."""
+    and the whole part's); and only ``plain()`` if a piece has no layout. ``kw``: ``cone_layout``'s
+    target_ratio, max_cones, margin, progress and poly. Returns (uv (m,3,2), island (m,) of each
+    triangle, island reports, seams (s,2), cones (list of (vertex, kappa)), feature edges among the
+    seams)."""
     from .cones import QC_WARN, realised_spread
     from .cut import cut_along_seams
     cut = cut_along_seams(F, len(V), curves)
-    uv, isl, reps, seams, cone_list, _ = cone_layout(V[cut.vert_of], cut.F, cones='auto', fit='true_scale',
-                                                     pack=True, features=False, **kw)
+    try:
+        uv, isl, reps, seams, cone_list, _ = cone_layout(V[cut.vert_of], cut.F, cones='auto',
+                                                         fit='true_scale', pack=True, features=False, **kw)
+    except ConformalError:              # a piece with no layout: the part as a whole may still have one
+        return _one_island(plain())
     seams = np.r_[np.sort(curves, axis=1), np.sort(cut.vert_of[seams], axis=1) if len(seams) else seams]
     got = (uv, isl, reps, np.unique(seams, axis=0), [(int(cut.vert_of[v]), k) for v, k in cone_list],
            len(curves))
