@@ -20,7 +20,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ..mesh import topology
-from ..mesh.geometry import angle_sums, face_normals_unnormalised
+from ..mesh.geometry import angle_defect, face_normals_unnormalised
 
 FEATURE_ANGLE = np.radians(40.0)   # a sharp edge: its faces' normals differ by more
 FEATURE_VERTICES = 12              # inner vertices of a feature curve, at least
@@ -61,7 +61,7 @@ def feature_curves(V, F, poly=None):
     E = np.c_[F.ravel()[h], F[h // 3, (h % 3 + 1) % 3]]
     on_boundary = np.zeros(n, bool)
     on_boundary[F.ravel()[tw < 0]] = True
-    defect = 2.0 * np.pi - angle_sums(V, F, n)
+    defect = angle_defect(V, F, on_boundary)
     inner = (np.bincount(E.ravel(), minlength=n) == 2) & ~on_boundary
     # the runs between junctions: components of the sharp edges joining two inner vertices
     Ei = E[inner[E[:, 0]] & inner[E[:, 1]]]
@@ -81,13 +81,11 @@ def feature_curves(V, F, poly=None):
     n_parts, part = topology.face_components(F, n, tw)
     pv = np.empty(n, np.int64)
     pv[F.ravel()] = np.repeat(part, 3)
-    interior = np.ones(n, bool)
-    interior[on_boundary] = False
-    used = np.zeros(n, bool)
-    used[F.ravel()] = True
-    k = interior & used
-    total = np.bincount(pv[k], defect[k], minlength=n_parts)
-    absolute = np.bincount(pv[k], np.abs(defect[k]), minlength=n_parts)
+    interior = np.zeros(n, bool)
+    interior[F.ravel()] = True
+    interior &= ~on_boundary
+    total = np.bincount(pv[interior], defect[interior], minlength=n_parts)
+    absolute = np.bincount(pv[interior], np.abs(defect[interior]), minlength=n_parts)
     calm = absolute <= FEATURE_NOISE * np.maximum(np.abs(total), 4.0 * np.pi)
     on &= calm[pv]
     return E[on[E[:, 0]] | on[E[:, 1]]]

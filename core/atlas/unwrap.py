@@ -625,13 +625,13 @@ def cone_layout(V, F, *, cones='auto', target_ratio: float = 0.5, max_cones: int
             unfold_flat_disk(Vp, Fp)
         if flat is not None:                  # no interior vertex (a card, a soup's triangle): no cone
             out = _one_island(flat_part(Vp, Fp, flat, target_ratio))
-        elif (out := _repeated_part(repeats, Vp, Fp, None if inner is None else poly_p)) is None:
+        elif (out := _repeated_part(repeats, Vp, Fp, poly_p)) is None:
             curves = feature_curves(Vp, Fp, poly_p) if features and cones == 'auto' else ()
             out = _feature_part(Vp, Fp, curves, plain, dict(target_ratio=target_ratio, max_cones=max_cones,
                                                             margin=margin, progress=sub, poly=poly_p)) \
                 if len(curves) else _one_island(plain())
             if n_parts > 1:
-                _keep_part(repeats, Vp, Fp, None if inner is None else poly_p, out, f"part {p + 1}")
+                _keep_part(repeats, Vp, Fp, poly_p, out, f"part {p + 1}")
         uv_p, isl_p, reps, seams_p, cones_p, nf = out
         done += share
         area = face_areas(Vp, Fp)
