@@ -20,7 +20,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ..mesh import topology
-from ..mesh.geometry import angle_defect, face_normals_unnormalised
+from ..mesh.geometry import angle_defect, unit_face_normals
 
 FEATURE_ANGLE = np.radians(40.0)   # a sharp edge: its faces' normals differ by more
 FEATURE_VERTICES = 12              # inner vertices of a feature curve, at least
@@ -44,10 +44,7 @@ def feature_curves(V, F, poly=None):
     none = np.zeros((0, 2), np.int64)
     if m == 0:
         return none
-    N = face_normals_unnormalised(V, F)
-    ln = np.linalg.norm(N, axis=1)
-    ok = ln > 1e-300
-    N = N / np.where(ok, ln, 1.0)[:, None]
+    N, ok = unit_face_normals(V, F)
     tw = topology.twin_halfedges(F, n)
     h = np.flatnonzero((tw >= 0) & (np.arange(3 * m) < tw))           # each interior edge once
     f1, f2 = h // 3, tw[h] // 3

@@ -302,12 +302,9 @@ def planar_patches(V, F, ue, inv, min_size=PATCH_MIN, max_patches=PATCH_MAX):
     the corner of its triangle on each boundary edge off that edge, tin (b,) that triangle)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
-    from ..mesh.geometry import corner_angles, face_normals_unnormalised
+    from ..mesh.geometry import corner_angles, unit_face_normals
     m = len(F)
-    N = face_normals_unnormalised(V, F)
-    ln = np.linalg.norm(N, axis=1)
-    ok = ln > 1e-300
-    N = N / np.where(ok, ln, 1.0)[:, None]
+    N, ok = unit_face_normals(V, F)
     # the (at most two) triangles of each edge
     fe = inv.ravel()
     ft = np.repeat(np.arange(m), 3)

@@ -42,6 +42,16 @@ def face_normals_unnormalised(V, F):
     return cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
 
 
+def unit_face_normals(V, F):
+    """(N (m,3) unit normals of the triangles ``F`` (m,3) on ``V`` (n,3), ok (m,) bool): ``ok`` False
+    where the triangle has no area to speak of (its cross product below 1e-300), its row of ``N`` then
+    left unscaled."""
+    N = face_normals_unnormalised(V, F)
+    ln = np.linalg.norm(N, axis=1)
+    ok = ln > 1e-300
+    return N / np.where(ok, ln, 1.0)[:, None], ok
+
+
 def folded_faces(V, F):
     """(m,) bool: the triangles folded over in the mesh itself: each one's normal points against the
     normal of every triangle that shares an edge with it (at least one): a crumpled spot, such as a
