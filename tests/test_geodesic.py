@@ -979,6 +979,44 @@ def test_flat_convex_patches_are_crossed_straight():
     assert [p[0].tolist() for p in sp.coarse.patches] == [p[0].tolist() for p in sp.fine.patches]
 
 
+def test_steiner_graphs_keep_every_link_at_its_own_length():
+    """The link matrix is built without scipy's search for repeated entries, which summed a pair linked
+    twice into one link of their total length. A graded graph with flat patches (a Boolean part) links
+    every pair of points once, both ways alike, by its segment's 3D length. An intrinsic triangulation
+    (a noisy scan-like patch) can put one vertex opposite an edge in both triangles of that edge: the
+    vertex and the edge's points are then joined through either triangle, by two different segments,
+    and both are kept (the sum of the two was one link before)."""
+    from core.geodesic import paths
+    from core.io.obj import read_obj
+    from core.mesh.triangulate import triangulate
+    mesh = read_obj(os.path.join(DATA, 'bool_boss.obj'))
+    tri, _ = triangulate(mesh.corner_verts, mesh.sizes, mesh.V)
+    V, F = mesh.V, mesh.corner_verts[tri]
+    sp = paths.SurfacePaths(V, F, 9, graded=True)
+    assert sp.fine.patches and sp.fine.own is None                 # patches and graded points are used
+    Vs, Fs = scan_patch(1500, 3)
+    Vs = Vs + np.c_[np.zeros((len(Vs), 2)), 0.04 * np.random.default_rng(0).normal(size=len(Vs))]
+    Fi, L, root, edges = paths.path_triangulation(Vs, Fs, {})
+    for g in (sp.fine, sp.coarse, paths.SteinerGraph(Vs, Fi, 5, edges=edges, lengths=L)):
+        G = g.G.tocoo()
+        real = (G.row < g.N) & (G.col < g.N)
+        row, col, w = G.row[real].astype(np.int64), G.col[real].astype(np.int64), G.data[real]
+        key, yek = row * g.N + col, col * g.N + row
+        order, back = np.lexsort((w, key)), np.lexsort((w, yek))
+        assert np.array_equal(key[order], yek[back]) and np.array_equal(w[order], w[back])   # both ways
+        pairs, count = np.unique(key, return_counts=True)
+        if not g.intrinsic:
+            assert count.max() == 1
+            pos = np.argsort(g.rank)
+            assert np.allclose(w, np.linalg.norm(g.P[pos[row]] - g.P[pos[col]], axis=1), rtol=1e-12)
+            continue
+        twice = np.isin(key, pairs[count == 2])
+        assert count.max() == 2 and twice.sum() > 100
+        # two segments of their own (different lengths), each within a triangle: not their sum
+        both = w[twice][np.argsort(key[twice], kind='stable')].reshape(-1, 2)
+        assert (both[:, 0] != both[:, 1]).all() and both.max() <= L.max()
+
+
 def test_richardsons_pair_crosses_the_same_patches(monkeypatch):
     """With a patch budget that takes only some of a mesh's flat patches (a cylinder's 64 flat strips
     of 40 triangles each and its two fan caps), the coarse graph takes exactly the fine graph's, and

@@ -163,11 +163,20 @@ class SteinerGraph:
         eid = np.repeat(np.arange(len(ue)), count)                           # the edge of each point
         t = (np.arange(len(eid)) - (start[eid] - n) + 1) / (count[eid] + 1)
         pts = np.concatenate([V, V[ue[eid, 0]] * (1 - t)[:, None] + V[ue[eid, 1]] * t[:, None]])
+        N = len(pts)
+        # the graph numbers its points along a Morton (Z-order) curve of their positions, so that the
+        # rows Dijkstra relaxes one after another lie close in memory (spot, k = 9: 64 -> 54 ms a search
+        # of this graph);
+        # ``rank`` (N,) is each point's number in the graph
+        self.rank = rank = morton_rank(pts)
+        rk = rank.astype(_index_type(N))           # the links' ends, in the matrix's index type
         # segments inside each triangle between points on two different sides (each such pair belongs to
-        # one triangle only), plus the chain of consecutive points along every edge (once per edge): no
-        # pair appears twice, and the memory is (m (3k+3)^2 / 2) index pairs at most; triangles are
-        # taken by the points on their three sides (one group without a grade)
-        A, B, W = [], [], []
+        # one triangle only, except where an intrinsic triangulation puts one vertex opposite an edge
+        # in both of the edge's triangles: that vertex and the edge's points are joined twice, by two
+        # segments of their own), plus the chain of consecutive points along every edge (once per
+        # edge); triangles are taken by the points on their three sides (one group without a grade).
+        # ``links``: (rank of one end, rank of the other, length) per block
+        links = []
         sig = count[inv]
         keys, group = np.unique(sig, axis=0, return_inverse=True)
         group = group.ravel()
@@ -178,8 +187,7 @@ class SteinerGraph:
             side = np.r_[[0b101, 0b011, 0b110], np.repeat([0b001, 0b010, 0b100], [c0, c1, c2])]
             ia, ib = np.triu_indices(own.shape[1], 1)
             cross = (side[ia] & side[ib]) == 0
-            A.append(own[:, ia[cross]].ravel())
-            B.append(own[:, ib[cross]].ravel())
+            ia, ib = ia[cross], ib[cross]
             if lengths is not None:
                 # the segment's length in the triangle's own planar copy (its points by their place
                 # along each side, which runs from ue[:, 0] to ue[:, 1])
@@ -191,7 +199,11 @@ class SteinerGraph:
                     tt = np.where(fwd[:, None], t[None], 1.0 - t[None])[..., None]
                     Q.append(L[:, j, None] * (1.0 - tt) + L[:, (j + 1) % 3, None] * tt)
                 Q = np.concatenate(Q, 1)
-                W.append(np.linalg.norm(Q[:, ia[cross]] - Q[:, ib[cross]], axis=2).ravel())
+                ro = rk[own]
+                links.append((ro[:, ia].ravel(), ro[:, ib].ravel(),
+                              np.linalg.norm(Q[:, ia] - Q[:, ib], axis=2).ravel()))
+            else:
+                links.extend(_triangle_links(own, ia, ib, pts, rk))
             if grade is None:
                 self.own = own                                               # (m, 3 + 3k), in F's order
         self.patches = []
@@ -199,26 +211,18 @@ class SteinerGraph:
             # a flat convex patch of several triangles (a CAD face, an n-gon's fan): straight links
             # between the points on its boundary, across the triangles inside it
             given = patches is not None
-            links, self.patches = patch_links(patches if given else planar_patches(V, F, ue, inv), ue, n,
+            pairs, self.patches = patch_links(patches if given else planar_patches(V, F, ue, inv), ue, n,
                                               count, start, None if given else PATCH_LINKS)
-            for a, b in links:
-                A.append(a)
-                B.append(b)
+            links.extend((rk[a], rk[b], _norm(pts[a] - pts[b])) for a, b in pairs)
+            del pairs
         for c in np.unique(count):
             es = np.flatnonzero(count == c)
             chain = np.concatenate([ue[es, :1], start[es][:, None] + np.arange(c)[None], ue[es, 1:]], 1)
-            A.append(chain[:, :-1].ravel())
-            B.append(chain[:, 1:].ravel())
-            if lengths is not None:
-                W.append(np.repeat(el[es] / (c + 1.0), c + 1))
-        N = len(pts)
-        # the graph numbers its points along a Morton (Z-order) curve of their positions, so that the
-        # rows Dijkstra relaxes one after another lie close in memory (spot, k = 9: 64 -> 54 ms a search
-        # of this graph);
-        # ``rank`` (N,) is each point's number in the graph
-        self.rank = rank = morton_rank(pts)
-        self.G = _link_matrix(A, B, W if lengths is not None else None, pts, rank, N, self.SPARE)
-        del A, B, W
+            a, b = chain[:, :-1].ravel(), chain[:, 1:].ravel()
+            w = np.repeat(el[es] / (c + 1.0), c + 1) if lengths is not None else _norm(pts[a] - pts[b])
+            links.append((rk[a], rk[b], w))
+        self.G = _link_matrix(links, N, self.SPARE)
+        del links
         self.P, self.F, self.ue, self.inv, self.count, self.start, self.N = pts, F, ue, inv, count, start, N
         if grade is None:
             self.pid = start[:, None] + np.arange(k)[None]                    # (e,k)
@@ -395,40 +399,79 @@ def patch_links(patches, ue, n, count, start, budget=PATCH_LINKS):
     return links, taken
 
 
-def _link_matrix(A, B, W, pts, rank, N, spare):
-    """The (N+1, N+1) CSR matrix of the links ``A[i] - B[i]`` (lists of index arrays into ``pts`` (N,3))
-    both ways, of lengths ``W`` (a list of arrays) or, if None, the 3D distances, over the points
-    numbered by ``rank`` (N,); its last row (the virtual source of ``search_from``) holds ``spare``
-    placeholder links. Built in 32-bit indices straight into one COO triple with the spare row, and
-    the lists emptied as they are copied: about 56 bytes a link at the peak (97 before, when the
-    spare row was appended to a finished matrix: the link budget's memory)."""
+def _index_type(N):
+    """The index type of a link matrix over ``N`` points (and its virtual source): 32-bit when it fits."""
+    return np.int32 if N + 1 < 2 ** 31 else np.int64
+
+
+def _norm(D):
+    """Lengths (l,) of the vectors ``D`` (l,3): ``sqrt((x^2 + y^2) + z^2)``, as ``np.linalg.norm`` sums
+    them (the same values to the bit)."""
+    return np.sqrt(D[:, 0] * D[:, 0] + D[:, 1] * D[:, 1] + D[:, 2] * D[:, 2])
+
+
+TRIANGLE_CHUNK = 1 << 20    # ``_triangle_links``: at most about this many links a block
+
+
+def _triangle_links(own, ia, ib, pts, rank):
+    """The links between the points ``own[:, ia]`` and ``own[:, ib]`` of each triangle (row) of ``own``
+    (f,q) (indices into ``pts`` (N,3)): blocks of (rank (l,) of one end, rank (l,) of the other, 3D
+    length (l,)), ``rank`` (N,) the points' numbers in the graph. Each coordinate is gathered once per
+    triangle point and then paired within the row (a triangle's q points, not its ~q^2 / 3 links, are
+    read from ``pts``); the lengths are ``_norm``'s, to the bit."""
+    step = max(1, TRIANGLE_CHUNK // max(len(ia), 1))
+    for lo in range(0, len(own), step):
+        o = own[lo:lo + step]
+        ro = rank[o]
+        w = None
+        for axis in range(3):
+            c = pts[o, axis]
+            d = c[:, ia] - c[:, ib]
+            d *= d
+            w = d if w is None else w + d
+        yield ro[:, ia].ravel(), ro[:, ib].ravel(), np.sqrt(w, out=w).ravel()
+
+
+def _link_matrix(links, N, spare):
+    """The (N+1, N+1) CSR matrix of the ``links`` (blocks of (rank a (l,), rank b (l,), length (l,)):
+    points by their number in the graph, mesh units) both ways; its last row (the virtual source of
+    ``search_from``) holds ``spare`` placeholder links. Built in 32-bit indices straight into one COO
+    triple with the spare row, the blocks freed as they are copied: the peak resident memory of a
+    build rises by about 52 bytes a link (spot's head cut at k = 31; 63 when the blocks held point
+    indices, the lengths were taken here and the rows were sorted: ``PATH_BUDGET``). The conversion
+    to CSR skips scipy's search for repeated entries (a sort of every row: 0.15 s at 10M links), which
+    summed them: a pair of points joined twice (through two triangles of an intrinsic triangulation,
+    see ``SteinerGraph``; ``patch_links`` adds none) keeps both links, and Dijkstra takes the
+    shorter. The columns of a row stay in the order the links came."""
     import scipy.sparse as sp
-    L = sum(len(a) for a in A)
-    itype = np.int32 if N + 1 < 2 ** 31 else np.int64
+    L = sum(len(a) for a, _, _ in links)
+    itype = _index_type(N)
     rows = np.empty(2 * L + spare, itype)
     cols = np.empty(2 * L + spare, itype)
     data = np.empty(2 * L + spare, np.float64)
     at = 0
-    while A:
-        a, b = A.pop(0), B.pop(0)
-        w = W.pop(0) if W is not None else np.linalg.norm(pts[a] - pts[b], axis=1)
-        c = len(a)
-        ra, rb = rank[a], rank[b]
+    while links:
+        ra, rb, w = links.pop(0)
+        c = len(ra)
         rows[at:at + c], cols[at:at + c] = ra, rb
         rows[L + at:L + at + c], cols[L + at:L + at + c] = rb, ra
-        w = np.maximum(w, 1e-300)                                # csgraph drops explicit zeros
-        data[at:at + c], data[L + at:L + at + c] = w, w
+        np.maximum(w, 1e-300, out=data[at:at + c])                # csgraph drops explicit zeros
+        data[L + at:L + at + c] = data[at:at + c]
         at += c
-        del a, b, w, ra, rb
-    # the spare row: distinct columns (COO sums repeated entries) while the graph has that many points,
-    # each rewritten per search; a smaller graph's row is appended by hand
+        del ra, rb, w
+    # the spare row: distinct columns while the graph has that many points, each rewritten per search;
+    # a smaller graph's row is appended by hand
     fits = N + 1 >= spare
     rows[2 * L:] = N
     cols[2 * L:] = np.arange(spare) if fits else N
     data[2 * L:] = 1.0
     if fits:
-        return sp.coo_matrix((data, (rows, cols)), shape=(N + 1, N + 1)).tocsr()
-    G = sp.coo_matrix((data[:2 * L], (rows[:2 * L], cols[:2 * L])), shape=(N, N)).tocsr()
+        coo = sp.coo_matrix((data, (rows, cols)), shape=(N + 1, N + 1))
+        coo.has_canonical_format = True      # repeated pairs stay apart (see above)
+        return coo.tocsr()
+    G = sp.coo_matrix((data[:2 * L], (rows[:2 * L], cols[:2 * L])), shape=(N, N))
+    G.has_canonical_format = True
+    G = G.tocsr()
     return sp.csr_matrix((np.r_[G.data, np.ones(spare)], np.r_[G.indices, np.full(spare, N, G.indices.dtype)],
                           np.r_[G.indptr, G.indptr[-1] + spare]), shape=(N + 1, N + 1))
 
@@ -582,7 +625,8 @@ GRADE_BUDGET = 12_000_000
 PATH_K = (9, 7, 5, 3)       # Steiner points per edge that ``surface_paths`` tries, best first (odd)
 PATH_K_MAX = 31            # the most Steiner points per edge ``surface_paths`` refines to for its target
 PATH_BUDGET = 20_000_000  # graph links (point pairs, both graphs) ``surface_paths`` may build: about
-# 57 bytes a link at the peak of building (``_link_matrix``), 31 kept, so ~1.1 GB. It was 12M at 97
+# 52 bytes a link at the peak of building (``_link_matrix``; 57-63 before the thirty-first round's
+# build), 31 kept, so ~1 GB. It was 12M at 97
 # bytes a link; on an 83k-triangle scan-like face (twice the relief) the paths then stopped at k = 5,
 # 0.19 % mean error (estimate 0.24 %); at 20M they take k = 7, 0.093 % (estimate 0.17 %)
 # (counted by ``path_links`` without the grading, which adds at most ``GRADE_EXTRA``, or what 0.9 of
