@@ -248,7 +248,7 @@ def geodesic_object(context, obj=None, source='AUTO', grid=0, boundary='UNIFORM'
             'boundary': boundary, 'flattening': origin, 'grid': [nx, ny],
             'cell': rep['cell'], 'masked_fraction': rep['masked_fraction'], 'solver': rep['solver'],
             'paths_islands': rep['paths_islands'], 'steiner_points': rep['steiner_points'],
-            'planar_islands': rep['planar_islands'],
+            'planar_islands': rep['planar_islands'], 'refined': rep.get('refined'),
             'distance_range': [lo, hi], 'bands': int(bands), 'mesh_hash': digest,
             'islands': rep['islands'], 'islands_reached': rep['islands_reached'],
             'unreached_vertices': int((~ok & md_used(md)).sum()), 'use_seams': bool(use_seams),
@@ -283,6 +283,7 @@ def summary_line(r):
         how, flat = f"surface paths ({r.get('steiner_points')} points per edge)", None
     else:
         how = f"grid {r['grid'][0]}x{r['grid'][1]} ({solver})" + \
+            (f" on the mesh subdivided {r['refined']['levels']} times" if r.get('refined') else "") + \
             (f", surface paths on {paths} island(s)" if paths else "")
     return (f"Geodesic distance on {r['object']!r} from {r['source_description']}: max "
             f"{r['distance_range'][1]:.4g}, {how}, " + (f"{flat}, " if flat else "") +

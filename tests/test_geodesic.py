@@ -365,12 +365,9 @@ def test_refined_seeds_march_one_by_one_and_slivers_take_the_mesh_paths():
     assert np.all(np.abs(d[sliver] - ref[sliver]) < 0.01 * ref[sliver]), d[sliver] / ref[sliver]
 
 
-def test_a_pocket_no_march_reaches_takes_no_other_source_s_seed(tmp_path):
-    """On spot's head cut at grid 1024 a few nodes by the boundary lie in a pocket that no march
-    reaches. Alone, each source leaves its vertices to be filled from their neighbours. In a set, a
-    refined source's seed (its own march, whose level covers the pocket) gave them its times instead,
-    whatever the other sources: +40 % at a boundary vertex. Now the set's distances are the smallest of
-    its sources' own."""
+def _spot_head_cut(tmp_path):
+    """spot's head cut (bench/meshes.py HEAD_CUTS['spot']: the faces above z = 0.546, their largest part;
+    919 vertices, 1760 triangles, a disk) from the corpus copy in tests/data."""
     import lzma
     from core.io.obj import read_obj
     path = tmp_path / 'spot.obj'
@@ -378,14 +375,23 @@ def test_a_pocket_no_march_reaches_takes_no_other_source_s_seed(tmp_path):
         path.write_bytes(src.read())
     m = read_obj(str(path))
     V, F = m.V, m.triangles()[0]
-    keep = F[V[F].mean(1)[:, 2] > 0.546]                       # bench/meshes.py HEAD_CUTS['spot']
+    keep = F[V[F].mean(1)[:, 2] > 0.546]
     _, lab = topology.face_components(keep, len(V))
     keep = keep[lab == np.bincount(lab).argmax()]
     used = np.unique(keep)
     new = np.full(len(V), -1)
     new[used] = np.arange(len(used))
-    V, F = V[used], new[keep]
-    solver = geo.GeodesicSolver(V, F, grid=1024)
+    return V[used], new[keep]
+
+
+def test_a_pocket_no_march_reaches_takes_no_other_source_s_seed(tmp_path):
+    """On spot's head cut at grid 1024 a few nodes by the boundary lie in a pocket that no march
+    reaches. Alone, each source leaves its vertices to be filled from their neighbours. In a set, a
+    refined source's seed (its own march, whose level covers the pocket) gave them its times instead,
+    whatever the other sources: +40 % at a boundary vertex. Now the set's distances are the smallest of
+    its sources' own."""
+    V, F = _spot_head_cut(tmp_path)
+    solver = geo.GeodesicSolver(V, F, grid=1024, refine=False)     # on the head cut's own triangles
     (d3, r3), (d118, r118) = solver.distance([3]), solver.distance([118])
     assert (r3['refined_sources'], r118['refined_sources']) == (1, 0)
     d, _ = solver.distance([3, 118])
@@ -394,6 +400,46 @@ def test_a_pocket_no_march_reaches_takes_no_other_source_s_seed(tmp_path):
         0.02 * np.linalg.norm(np.ptp(V, axis=0))
     apart = np.abs(d - both)[far] / both[far]
     assert apart.max() < 0.01, apart.max()
+
+
+def test_a_forced_grid_on_a_map_far_from_conformal_marches_on_finer_triangles(tmp_path, capsys):
+    """spot's head cut at a forced grid: its map is far from conformal on its triangles (metric_excess
+    0.13), a metric the re-marches do not follow, so the error stayed at about 0.1 % whatever the grid
+    (0.11 / 0.08 / 0.09 / 0.11 % mean at 512-4096 from its far source, against exact MMP). The solver
+    now marches on the same surface subdivided twice at its edge midpoints (excess 0.03), and the error
+    falls with the grid (0.069 / 0.029 / 0.014 / 0.009 %). Against surface paths at 31 points per
+    edge (0.005 % from exact MMP on this mesh), from its boundary vertex farthest from the middle:
+    0.031 % at 512 and 0.014 % at 1024 (0.088 % and 0.075 % on its own triangles); the distances come
+    back per input vertex. A surface point is answered in the child triangle that holds it."""
+    V, F = _spot_head_cut(tmp_path)
+    ref = geo.GeodesicSolver(V, F, method='paths', steiner_points=31)
+    bnd = np.unique(np.concatenate(topology.boundary_loops(F, len(V))))
+    mid = np.argmin(np.linalg.norm(V - V.mean(0), axis=1))
+    src = int(bnd[np.argmax(np.linalg.norm(V[bnd] - V[mid], axis=1))])
+    D, _ = ref.distance([src])
+    far = D > 0.05 * np.linalg.norm(np.ptp(V, axis=0))
+
+    def err(solver):
+        d, rep = solver.distance([src])
+        assert d.shape == (len(V),) and np.isfinite(d).all()
+        return float(np.mean(np.abs(d[far] - D[far]) / D[far])), rep
+    e512, rep = err(geo.GeodesicSolver(V, F, grid=512))
+    assert rep['refined'] == {'levels': 2, 'triangles': 16 * len(F)} and rep['marches'] == 3
+    e1024, _ = err(geo.GeodesicSolver(V, F, grid=1024))
+    coarse, rep = err(geo.GeodesicSolver(V, F, grid=1024, refine=False))
+    assert 'refined' not in rep
+    assert e1024 < 0.5 * e512 and e1024 < 0.5 * coarse and e1024 < 5e-4, (e512, e1024, coarse)
+    # a surface point: the same distances as from the vertex it sits on (its corner, barycentric 1)
+    f = int(np.flatnonzero((F == src).any(1))[0])
+    b = (F[f] == src).astype(float)
+    solver = geo.GeodesicSolver(V, F, grid=512)
+    d_pt, _ = solver.distance(points=(np.array([f]), b[None]))
+    d_v, _ = solver.distance([src])
+    assert np.allclose(d_pt, d_v, rtol=2e-3)
+    obj = tmp_path / 'head.obj'
+    write_obj(str(obj), V, F)
+    rc = main(['geodesic', str(obj), '--source', str(src), '--grid', '512', '--out', str(tmp_path / 'd.csv')])
+    assert rc == 0 and 'grid 512x' in (out := capsys.readouterr().out) and 'subdivided 2 times' in out, out
 
 
 def test_a_part_the_own_flattening_folds_is_answered_by_surface_paths(bump65, monkeypatch):
@@ -1609,7 +1655,7 @@ def test_a_source_the_grid_cannot_seed_is_answered_by_surface_paths():
     0.5 % of the paths on average."""
     from meshgen import cow_head
     V, F = cow_head()
-    gs = geo.GeodesicSolver(V, F, grid=512)
+    gs = geo.GeodesicSolver(V, F, grid=512, refine=False)           # the head's own triangles
     paths = geo.GeodesicSolver(V, F, method='paths')
     d, rep = gs.distance([561])
     dp, _ = paths.distance([561])

@@ -50,7 +50,9 @@ def run(args):
     else:
         ny, nx = report['grid']
         fin = dist[np.isfinite(dist)]
-        how = f"grid {nx}x{ny}, solver {report['solver']}" if nx else ""
+        fine = report.get('refined')
+        on = f" on the mesh subdivided {fine['levels']} times ({fine['triangles']} triangles)" if fine else ""
+        how = f"grid {nx}x{ny}{on}, solver {report['solver']}" if nx else ""
         if report['paths_islands']:
             paths = (f"surface paths on {report['paths_islands']} of {report['islands_reached']} islands "
                      f"({report['steiner_points']} points per edge)")
