@@ -363,7 +363,7 @@ def patch_links(patches, ue, n, count, start, budget=PATCH_LINKS):
     """Links across the ``patches`` (``planar_patches``) for ``SteinerGraph``: every pair of graph points
     on a patch's boundary (its boundary vertices, and the ``count`` (e,) points of each boundary edge
     from ``start`` (e,)) by the straight segment, but for the pairs the triangle links and the edge
-    chains already join (the graph sums repeated links): on one edge, in one triangle, or the two ends
+    chains already join (each is linked once): on one edge, in one triangle, or the two ends
     of a mesh edge (``ue`` (e,2), ``n`` vertices). Patches are taken in order, each if its links fit in
     what is left of ``budget`` (None: every one). Returns (list of (a (l,), b (l,)) point index pairs,
     the patches taken). Without them an n-gon cut into a fan of needles is crossed through the Steiner

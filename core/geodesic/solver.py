@@ -1417,25 +1417,30 @@ def paths_choice(ch, method, grid, mu_mode):
     return k
 
 
+def marching(charts):
+    """True if every chart of ``charts`` (list) is marched on a grid (a ``Chart`` not answered by
+    surface paths)."""
+    return all(isinstance(ch, Chart) and not ch.paths_k for ch in charts)
+
+
 def refine_levels(charts, grid, method, given_uv, target, faces):
     """Midpoint subdivisions (0..``REFINE_LEVELS``) of the mesh for a grid the user asks for (``grid``
     given, or ``method`` 'grid') on the solver's own map (``given_uv`` False), where the largest metric
     term (``ERR_ANISO`` times ``metric_excess``, which halves with each) of the ``charts`` that march is
     above ``REFINE_TRIGGER`` of ``target``: the fewest that bring it within ``REFINE_SHARE`` of it, as
     long as the ``faces`` triangles, four times as many a level, stay within ``REFINE_MAX_FACES``, and
-    only when every chart marches (the whole mesh is subdivided). The
-    re-marches do not follow a metric far from conformal on the triangles, and that error does not
-    fall with the grid (spot's head cut: 0.11, 0.08, 0.09, 0.11 % mean at 512-4096, its far source
-    rising); on the finer triangles of the same surface it does. 'auto' with an automatic grid
-    answers such charts by surface paths instead."""
+    only when every chart marches (``marching``: the whole mesh is subdivided). The re-marches do not
+    follow a metric far from conformal on the triangles, and that error does not fall with the grid
+    (spot's head cut: 0.11, 0.08, 0.09, 0.11 % mean at 512-4096, its far source rising); on the finer
+    triangles of the same surface it does. 'auto' with an automatic grid answers such charts by
+    surface paths instead."""
     if given_uv or (grid is None and method != 'grid'):
         return 0
-    if not all(isinstance(ch, Chart) and not ch.paths_k for ch in charts):
+    if not marching(charts):
         # a part answered by surface paths (or exactly, in its plane) would only get slower paths on
         # the finer mesh (suzanne's head by its seams: 0.04 -> 0.05 %)
         return 0
-    term = max([ERR_ANISO * ch.excess for ch in charts if isinstance(ch, Chart) and not ch.paths_k],
-               default=0.0)
+    term = max((ERR_ANISO * ch.excess for ch in charts), default=0.0)
     if not term > REFINE_TRIGGER * target:
         return 0
     levels = min(REFINE_LEVELS, int(np.ceil(np.log2(term / (REFINE_SHARE * target)))))
@@ -1811,9 +1816,7 @@ class GeodesicSolver:
                 report['refine_failed'] = str(exc)
             else:
                 fine = self.fine.solver
-                marched = sum(isinstance(ch, Chart) and not ch.paths_k for ch in self.charts)
-                if sum(isinstance(ch, Chart) and not ch.paths_k for ch in fine.charts) != marched or \
-                        len(fine.charts) != len(self.charts):
+                if len(fine.charts) != len(self.charts) or not marching(fine.charts):
                     # the finer map came out otherwise (an island whose map now overlaps itself is
                     # answered by surface paths there): the grid the user asked for marches here
                     report['refine_failed'] = "the finer triangles' map has other charts"
