@@ -6,6 +6,8 @@ while a piecewise-linear map computed on the finer triangles follows the surface
 more closely (``core.geodesic.solver``, "Finer triangles for a forced grid")."""
 import numpy as np
 
+from ..errors import ConformalError
+
 
 def _edge_keys(F, n):
     """Sorted unique keys ``min * n + max`` (e,) of the edges of ``F`` (m,3), and the key index (m,3) of
@@ -37,14 +39,16 @@ def subdivide(V, F):
 def subdivide_pairs(F, n, pairs):
     """The vertex pairs (2k,2) of ``subdivide(V, F)`` along the edges ``pairs`` (k,2) of ``F`` (m,3) (on
     ``n`` vertices), each split at its midpoint into two, in the order (a, mid), (mid, b). Raises
-    ValueError if a pair is no edge of ``F``."""
+    ConformalError if a pair is no edge of ``F``."""
     F = np.asarray(F, np.int64)
     pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
     key, _ = _edge_keys(F, n)
     want = np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1])
     at = np.minimum(np.searchsorted(key, want), max(len(key) - 1, 0))
-    if len(want) and not (len(key) and (key[at] == want).all()):
-        raise ValueError("a vertex pair is no edge of the mesh")
+    inside = (pairs >= 0).all() and (pairs < n).all()
+    if len(want) and not (inside and len(key) and (key[at] == want).all()):
+        raise ConformalError("a seam's vertex pair is no edge of the mesh: a seam must join two vertices "
+                             "of one face")
     mid = n + at
     return np.stack([np.c_[pairs[:, 0], mid], np.c_[mid, pairs[:, 1]]], 1).reshape(-1, 2)
 
