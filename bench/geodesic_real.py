@@ -49,6 +49,7 @@ EXCLUDE = 0.02
 SKIP_DEFAULT = False   # --skip-default: the first of --grids instead of the automatic grid
 WHERE = 0              # --where K: print our K worst vertices per source set and what they lie in
 KS = []                # --ks: Steiner points per edge of the surface-path rows ('ours paths', k = K)
+TARGETS = []           # --targets: error targets of the 'ours target' rows (the solver's own choice for each)
 REAL = ['woody', 'alligator', 'suzanne', 'teapot', 'spot', 'stanford-bunny', 'cow', 'ogre']
 SURF = ['bump', 'bump3', 'edgebump', 'ridge', 'saddle', 'waves', 'cliff', 'blob']
 HEADER = ('| mesh | method | grid | mean % central | far | curvature | multi | max % | below Euclid / above '
@@ -65,27 +66,32 @@ def print_row(r):
 
 
 def summary(rows):
-    """Per mesh: our default against heat and mesh FMM (the smallest ratio over the source sets), and
-    our repeated query against the heat method's one-shot time (set-up + one solve)."""
-    print('\n| mesh | ours mean (worst set) % | ours max % | heat / ours (min over sets) | '
+    """Per mesh: our default (and each ``--targets`` row) against heat and mesh FMM (the smallest ratio
+    over the source sets), and our repeated query against the heat method's one-shot time (set-up +
+    one solve)."""
+    print('\n| mesh | ours | ours mean (worst set) % | ours max % | heat / ours (min over sets) | '
           'FMM / ours (min over sets) | ours query s | heat one-shot s | query / heat one-shot |\n'
-          '|---|---|---|---|---|---|---|---|')
+          '|---|---|---|---|---|---|---|---|---|')
     for mesh in dict.fromkeys(r['mesh'] for r in rows):
         rs = [r for r in rows if r['mesh'] == mesh]
-        o = next((r for r in rs if r['method'] == 'ours default'
-                  or (r['method'].startswith('ours sphere mode') and 'default' in r['method'])), None)
         h = next((r for r in rs if r['method'].startswith('heat')), None)
         f = next((r for r in rs if r['method'].startswith('mesh FMM')), None)
-        if o is None or h is None:
-            continue
+        for o in rs:
+            if h is not None and (o['method'] in ('ours default', 'ours target') or (
+                    o['method'].startswith('ours sphere mode') and 'default' in o['method'])):
+                _summary_row(mesh, o, h, f)
 
-        def ratio(x, o=o):
-            if x is None:
-                return '-'
-            return f"{min(x['per_set'][k][0] / max(o['per_set'][k][0], 1e-12) for k in SETS):.1f}x"
-        one = h['setup'] + h['query']
-        print(f"| {mesh} | {100 * o['worst_mean']:.4f} | {100 * o['max']:.3f} | {ratio(h)} | {ratio(f)} | "
-              f"{o['query']:.3f} | {one:.3f} | {o['query'] / max(one, 1e-9):.1f}x |", flush=True)
+
+def _summary_row(mesh, o, h, f):
+    """One row of ``summary``: ours ``o`` against heat ``h`` and mesh FMM ``f`` (or None)."""
+    def ratio(x):
+        if x is None:
+            return '-'
+        return f"{min(x['per_set'][k][0] / max(o['per_set'][k][0], 1e-12) for k in SETS):.1f}x"
+    one = h['setup'] + h['query']
+    which = 'default' if o['method'] != 'ours target' else f"target {o['grid']}"
+    print(f"| {mesh} | {which} | {100 * o['worst_mean']:.4f} | {100 * o['max']:.3f} | {ratio(h)} "
+          f"| {ratio(f)} | {o['query']:.3f} | {one:.3f} | {o['query'] / max(one, 1e-9):.1f}x |", flush=True)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -460,6 +466,12 @@ def run_mesh(name, grids, rows, calib, plot, sphere=False):
         ts = time.perf_counter() - t
         d, tq, rep = ours(gg)
         evaluate(f'ours paths {kk}', 'ours paths', f'k={kk}', d, ts, tq, rep)
+    for e in TARGETS:
+        t = time.perf_counter()
+        gg = GeodesicSolver(V, F, seams=seams, error_target=e)
+        ts = time.perf_counter() - t
+        d, tq, rep = ours(gg)
+        evaluate(f'ours target {e:g}', 'ours target', f'{100 * e:g}%', d, ts, tq, rep)
     for aname, d, setup, tq in anchor_runs(Vs, Fs, sets, reduce):
         evaluate(aname, aname, '-', d, setup, tq)
     rows.append({'mesh': name, 'verts': len(V), 'tris': len(F), 'method': 'exact MMP', 'grid': '-',
@@ -550,7 +562,9 @@ def plot_mesh(name, results):
     ours = sorted((r for r in results.values() if r['method'] in ('ours', 'ours default')),
                   key=lambda r: r['grid'] if isinstance(r['grid'], int) else 0)
     paths = sorted((r for r in results.values() if r['method'] == 'ours paths'), key=lambda r: r['query'])
-    for rs, what, mark in ((ours, 'ours', 'o'), (paths, 'ours, surface paths', 'D')):
+    targets = sorted((r for r in results.values() if r['method'] == 'ours target'), key=lambda r: r['query'])
+    for rs, what, mark in ((ours, 'ours', 'o'), (paths, 'ours, surface paths', 'D'),
+                           (targets, 'ours, error targets', 's')):
         if not rs:
             continue
         ax.loglog([r['query'] for r in rs], [100 * r['mean'] for r in rs], mark + '-',
@@ -583,6 +597,10 @@ def main():
     ap.add_argument('--ks', nargs='*', type=int, default=[],
                     help='also ours answered by surface paths with this many Steiner points per edge '
                          '(method paths, steiner_points K: the accuracy-against-time curve of the paths)')
+    ap.add_argument('--targets', nargs='*', type=float, default=[],
+                    help='also ours at these error targets (mean relative, e.g. 0.005: the solver chooses '
+                         'its grid or Steiner points for each; the accuracy-against-time curve of the '
+                         'default method)')
     ap.add_argument('--no-plot', action='store_true')
     ap.add_argument('--skip-default', action='store_true',
                     help='do not run the automatic grid (the first of --grids takes its place)')
@@ -590,9 +608,10 @@ def main():
                     help='print our K worst vertices per source set and what they lie in (boundary, '
                          'on-mesh, cell/edge, anisotropy)')
     a = ap.parse_args()
-    global SKIP_DEFAULT, WHERE, KS
+    global SKIP_DEFAULT, WHERE, KS, TARGETS
     SKIP_DEFAULT = a.skip_default
     KS = a.ks
+    TARGETS = a.targets
     WHERE = a.where
     if not os.path.isdir(MESH_DIR):
         print(f"# {MESH_DIR} is missing: only the generated surfaces are measured")

@@ -189,6 +189,7 @@ def test_panel_draws_button_and_report(addon, bl):
     panel.draw(fake, bpy.context)
     assert ('operator', 'mesh.conformal_geodesic_distance') in log
     assert ('prop', 'source') in log and ('prop', 'grid') in log and ('prop', 'bands') in log
+    assert ('prop', 'target_error') in log
     bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA')
     log.clear()
     panel.draw(fake, bpy.context)
@@ -338,3 +339,26 @@ def test_a_closed_mesh_reports_surface_paths_not_a_grid(addon, bl):
     far = np.isclose(np.abs(V - V[0]).sum(1), 6.0)
     exact = np.where(far, np.sqrt(20.0), np.linalg.norm(V - V[0], axis=1))
     assert np.abs(d - exact).max() <= 1e-3 * exact.max()            # the 0.1 % target
+
+
+def test_a_looser_target_error_answers_with_fewer_points(addon, bl):
+    """The sidebar's Target Error (a percentage) reaches the solver: a closed sphere at 1 % is answered
+    by surface paths of 3 points per edge (9 or more at the default 0.1 %), its report says so, the
+    two solvers are kept apart, and the distances agree within the looser target."""
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
+    obj = bpy.context.object
+    got = {}
+    for pct in (0.1, 1.0, 0.1):
+        select_vertices(obj, [0])
+        assert bpy.ops.mesh.conformal_geodesic_distance(target_error=pct) == {'FINISHED'}
+        bpy.ops.object.mode_set(mode='OBJECT')
+        rep = report_of(obj.data)
+        assert rep['error_target'] == pytest.approx(pct / 100) and not rep['warnings']
+        got.setdefault(pct, []).append((rep['steiner_points'], rep['flattening'],
+                                        point_attr(obj.data, 'geodesic_distance')))
+    (k_def, origin, d_def), (k_again, origin_again, d_again) = got[0.1]
+    (k_loose, _, d_loose), = got[1.0]
+    assert k_def >= 9 and k_loose == 3 and k_again == k_def and origin_again == 'geodesic cache'
+    assert np.array_equal(d_def, d_again)
+    far = d_def > 0.1 * d_def.max()
+    assert np.abs(d_loose[far] - d_def[far]).mean() / d_def[far].mean() <= 0.01

@@ -59,12 +59,11 @@ from ..mesh.geometry import cross, edge_graph, face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
 from .planar import plane_coordinates, planar_paths
 from ..atlas.unfold import unfold_flat_disk
-from .paths import (PATH_BUDGET, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, SteinerGraph, path_points,
-                    path_triangulation, thin_warning, steiner_distances, surface_paths)
+from .paths import (PATH_BUDGET, PATH_ERROR_9, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, SteinerGraph,
+                    path_points, path_triangulation, target_k, thin_warning, steiner_distances, surface_paths)
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
 METHODS = ('auto', 'grid', 'paths')
-PATH_ERROR_9 = 7e-4  # expected mean error of the paths at k = 9 (measured 0.02-0.07 %; falls as k^-1.85)
 PATH_COST = 2.0      # 'auto': surface paths where their links are at most this many per grid node update
 CUT_PATH_BUDGET = 3_000_000  # links for a part the flattening cut (suzanne's face: k = 29, 2.8M links)
 MU_MODES = ('metric', 'vertex', 'face')
@@ -1382,7 +1381,8 @@ def paths_choice(ch, method, grid, mu_mode):
     allows, at least ``PATH_K[-1]``); 'auto' with an automatic grid: the largest odd ``k`` up to
     ``PATH_K_MAX`` whose graph and Richardson's coarse one have at most ``PATH_COST`` links per node
     update of the grid the target asks for (its nodes times its marches; and at most
-    ``PATH_BUDGET``), if that ``k`` is at least ``PATH_K[0]``. A link costs about a quarter of a node
+    ``PATH_BUDGET``), if that ``k`` is at least ``PATH_K[0]`` (or the fewer points a looser target
+    needs, ``target_k``; a query then starts from those). A link costs about a quarter of a node
     update (spot: 2M links in 0.5 s; a query of its 832-node grid ~1 s for ~1M updates), so the paths
     run where they take at most about half the march's time, with as many points as that time buys.
     That picks small, coarse islands whose map varies a lot, where the automatic grid grows large
@@ -1404,7 +1404,8 @@ def paths_choice(ch, method, grid, mu_mode):
         # grid), and the paths search the intrinsic Delaunay triangulation there (0.62 %)
         return PATH_K[0]
     marches = 1 + (ch.planned_passes if mu_mode == 'metric' else 0)
-    k = path_points(m, ne, min(PATH_BUDGET, PATH_COST * ch.nodes * marches), PATH_K[0], PATH_K_MAX)
+    # (a target looser than the default needs fewer points, ``target_k``: the paths are weighed at those)
+    k = path_points(m, ne, min(PATH_BUDGET, PATH_COST * ch.nodes * marches), target_k(ch.target), PATH_K_MAX)
     if k is None:
         kb = path_points(m, ne)
         # a map the grid cannot follow (its metric term alone above half the target), or a grid held
@@ -1978,6 +1979,9 @@ class GeodesicSolver:
                 # unseeded grid chart the most up to PATH_K[0] that fit
                 k0 = _budget_k(ch, self.steiner_points) if self.steiner_points else \
                     ch.paths_k or _budget_k(ch)
+                if not self.steiner_points and target_k(self.error_target) < PATH_K[0]:
+                    # a target looser than the paths' default points need: start from fewer
+                    k0 = min(k0, target_k(self.error_target))
                 Xp = np.einsum('kc,kcd->kd', pb[mine], ch.V[ch.F[src_faces]]) if mine.any() else None
                 d, path_est[c], k_used = surface_paths(ch.V, ch.F, loc, k0, X=Xp,
                                                        faces=src_faces if mine.any() else None,
