@@ -65,6 +65,11 @@ from .paths import (PATH_BUDGET, PATH_ERROR_9, PATH_K, PATH_K_MAX, STEINER, STEI
 SOLVERS = ('auto', 'skfmm', 'sweep')
 METHODS = ('auto', 'grid', 'paths')
 PATH_COST = 2.0      # 'auto': surface paths where their links are at most this many per grid node update
+# ... and at an error target looser than the default (``target_k`` below 9 points), where both meet it:
+# the paths where they are about as fast as the march. A query of bump at n = 65: the k = 3 pair's 419k
+# links in 31 ms (74 ns a link), its grid of 143k nodes in 66 ms with one march (460 ns a node, the
+# seed and the sampling included)
+PATH_COST_LOOSE = 6.0
 CUT_PATH_BUDGET = 3_000_000  # links for a part the flattening cut (suzanne's face: k = 29, 2.8M links)
 MU_MODES = ('metric', 'vertex', 'face')
 GRID_MIN, GRID_MAX = 64, 4096
@@ -1381,10 +1386,12 @@ def paths_choice(ch, method, grid, mu_mode):
     allows, at least ``PATH_K[-1]``); 'auto' with an automatic grid: the largest odd ``k`` up to
     ``PATH_K_MAX`` whose graph and Richardson's coarse one have at most ``PATH_COST`` links per node
     update of the grid the target asks for (its nodes times its marches; and at most
-    ``PATH_BUDGET``), if that ``k`` is at least ``PATH_K[0]`` (or the fewer points a looser target
-    needs, ``target_k``; a query then starts from those). A link costs about a quarter of a node
-    update (spot: 2M links in 0.5 s; a query of its 832-node grid ~1 s for ~1M updates), so the paths
-    run where they take at most about half the march's time, with as many points as that time buys.
+    ``PATH_BUDGET``), if that ``k`` is at least ``PATH_K[0]`` (at a looser target: at least the fewer
+    points it needs, ``target_k``, a query then starting from those, and ``PATH_COST_LOOSE`` links a
+    node update, where both methods meet the target and the faster is taken). A link costs about a
+    quarter of a node update (spot: 2M links in 0.5 s; a query of its 832-node grid ~1 s for ~1M
+    updates), so the paths run where they take at most about half the march's time, with as many
+    points as that time buys.
     That picks small, coarse islands whose map varies a lot, where the automatic grid grows large
     and its estimate is least reliable (suzanne's face: grid 2240, 0.8-1.9 % mean, 10 s a query), and
     leaves fine meshes to the grid (bump at n = 65: 2.7M links at k = 9 against 0.8M updates).
@@ -1404,8 +1411,11 @@ def paths_choice(ch, method, grid, mu_mode):
         # grid), and the paths search the intrinsic Delaunay triangulation there (0.62 %)
         return PATH_K[0]
     marches = 1 + (ch.planned_passes if mu_mode == 'metric' else 0)
-    # (a target looser than the default needs fewer points, ``target_k``: the paths are weighed at those)
-    k = path_points(m, ne, min(PATH_BUDGET, PATH_COST * ch.nodes * marches), target_k(ch.target), PATH_K_MAX)
+    # (a target looser than the default needs fewer points, ``target_k``: the paths are weighed at those,
+    # and taken where they are about as fast as the grid, ``PATH_COST_LOOSE``)
+    k_t = target_k(ch.target)
+    cost = PATH_COST if k_t >= PATH_K[0] else PATH_COST_LOOSE
+    k = path_points(m, ne, min(PATH_BUDGET, cost * ch.nodes * marches), k_t, PATH_K_MAX)
     if k is None:
         kb = path_points(m, ne)
         # a map the grid cannot follow (its metric term alone above half the target), or a grid held
