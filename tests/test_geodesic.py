@@ -1315,6 +1315,8 @@ def test_a_mesh_of_needles_takes_intrinsic_surface_paths_by_default():
         assert rep['paths_islands'] == 1 and gs.charts[0].paths_cache['triangulation'] is not None
         assert e.mean() < 1e-3 and e.max() < 0.01 and rep['error_estimate'] >= e.mean(), \
             (s, e.mean(), e.max(), rep['error_estimate'])
+        # no grid is named: the chart's own grid was never marched (the report said 'grid 64x..')
+        assert gs.charts[0].size and rep['grid'] == [0, 0] and rep['cell'] is None
 
 
 def test_steiner_points_trade_accuracy_for_speed_with_an_honest_estimate():

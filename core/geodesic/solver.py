@@ -2030,8 +2030,13 @@ class GeodesicSolver:
         np.minimum.at(dist, self.vert_of, dist_s)
         dist[~self.on_mesh] = np.nan
         t_sample = time.perf_counter() - t
-        G = max((self.charts[c] for c in active), key=lambda ch: ch.size)
-        ny, nx = G.grid.shape if G.size else (0, 0)
+        # the grid reported is the largest of the charts that marched (an island answered by paths or
+        # in its plane keeps an unused grid: reporting it named a grid no distance came from)
+        marched = [self.charts[c] for c in active if c not in path_est and c not in planar]
+        G = max(marched, key=lambda ch: ch.size) if marched else None
+        if G is not None and not G.size:
+            G = None
+        ny, nx = G.grid.shape if G is not None else (0, 0)
         # the error estimate of each reached chart, at the median distance of this query
         ests = []
         for c in active:
@@ -2071,8 +2076,8 @@ class GeodesicSolver:
                         'total': total + sum(self.seconds.values())})
         report = dict(self.report)
         report.update({
-            'grid': [ny, nx], 'cell': G.grid.h if G.size else None,
-            'masked_fraction': float(1 - G.grid.inside.mean()) if G.size else None,
+            'grid': [ny, nx], 'cell': G.grid.h if G is not None else None,
+            'masked_fraction': float(1 - G.grid.inside.mean()) if G is not None else None,
             'solver': self.solver, 'sources': int(len(X_src)),
             'seed_radius': float(min(radii)) if radii else None,
             'on_mesh': hybrid, 'refined_sources': refined, 'marches': marches,
