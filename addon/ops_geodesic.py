@@ -285,9 +285,13 @@ def summary_line(r):
         # closed parts (and parts the map cannot resolve) are answered on the surface: no grid
         how, flat = f"surface paths ({r.get('steiner_points')} points per edge)", None
     else:
-        how = f"grid {r['grid'][0]}x{r['grid'][1]} ({solver})" + \
-            (f" on the mesh subdivided {r['refined']['levels']} times" if r.get('refined') else "") + \
-            (f", surface paths on {paths} island(s)" if paths else "")
+        # a mix: the grid of the parts that marched (none if every part took paths or its plane)
+        parts = [f"grid {r['grid'][0]}x{r['grid'][1]} ({solver})" +
+                 (f" on the mesh subdivided {r['refined']['levels']} times" if r.get('refined') else "")
+                 ] if r['grid'][0] else []
+        parts += [f"surface paths on {paths} island(s)"] if paths else []
+        parts += [f"exact on {r['planar_islands']} flat island(s)"] if r.get('planar_islands') else []
+        how = ", ".join(parts)
     return (f"Geodesic distance on {r['object']!r} from {r['source_description']}: max "
             f"{r['distance_range'][1]:.4g}, {how}, " + (f"{flat}, " if flat else "") +
             f"{r['seconds']['total']:.2f} s, estimated mean error {100 * r['error_estimate']:.2g}%")
@@ -362,7 +366,8 @@ GEODESIC_ROWS = [
     ("Grid", lambda r: ("none: flat, exact" if r.get('planar_islands') == r.get('islands_reached')
                         else f"surface paths, {r['steiner_points']} points per edge" if r.get('paths_islands')
                         == r.get('islands_reached') and r.get('steiner_points')
-                        else f"{r['grid'][0]} x {r['grid'][1]}")),
+                        else f"{r['grid'][0]} x {r['grid'][1]}" if r['grid'][0]
+                        else "none: surface paths, flat parts exact")),
     ("Solver", 'solver'),
     ("Flattening", 'flattening'),
     ("Error estimate", lambda r: f"{100 * r['error_estimate']:.2g} %" if 'error_estimate' in r else "-"),

@@ -362,3 +362,21 @@ def test_a_looser_target_error_answers_with_fewer_points(addon, bl):
     assert np.array_equal(d_def, d_again)
     far = d_def > 0.1 * d_def.max()
     assert np.abs(d_loose[far] - d_def[far]).mean() / d_def[far].mean() <= 0.01
+
+
+def test_status_line_of_parts_answered_by_paths_and_by_their_plane():
+    """Two islands, one answered by surface paths and one flat, exact in its plane: the status line
+    and the sidebar's Grid row name both and no grid (the report's grid is [0, 0]; it said
+    "grid 0x0" before, and named the paths island's unused grid before that)."""
+    from conformal_flatten.addon.ops_geodesic import GEODESIC_ROWS, summary_line
+    rep = {'solver': 'skfmm', 'islands_reached': 2, 'paths_islands': 1, 'planar_islands': 1,
+           'steiner_points': 9, 'flattening': 'computed', 'boundary': 'UNIFORM', 'grid': [0, 0],
+           'object': 'two', 'source_description': 'vertex 0', 'distance_range': [0.0, 2.0],
+           'seconds': {'total': 0.1}, 'error_estimate': 5e-4}
+    line = summary_line(rep)
+    assert 'surface paths on 1 island(s), exact on 1 flat island(s)' in line and 'grid' not in line
+    row = dict(GEODESIC_ROWS)['Grid'](rep)
+    assert row == "none: surface paths, flat parts exact"
+    rep.update(grid=[512, 300], planar_islands=0, islands_reached=2)
+    assert 'grid 512x300 (scikit-fmm), surface paths on 1 island(s)' in summary_line(rep)
+    assert dict(GEODESIC_ROWS)['Grid'](rep) == "512 x 300"
