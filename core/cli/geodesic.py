@@ -30,7 +30,7 @@ def add_arguments(p):
                    help='auto (scikit-fmm if installed), skfmm, or sweep (pure numpy)')
     p.add_argument('--error-target', type=float, default=ERROR_TARGET, metavar='E',
                    help='target for the estimated mean relative error, sets the automatic grid and the '
-                        f'surface paths\' points (default {ERROR_TARGET:g}; 0.005-0.01 answer 3-15x '
+                        f'surface paths\' points (default {ERROR_TARGET:g}; 0.005-0.01 answer 2-20x '
                         'faster by surface paths); a result above it prints a warning')
     p.add_argument('--steiner-points', type=int, default=None, metavar='K',
                    help='points per edge (odd, 3..31) on the parts answered by surface paths, without '

@@ -659,8 +659,8 @@ def target_k(target):
     """The fewest Steiner points per edge of ``PATH_K`` (odd) whose expected mean error,
     ``PATH_ERROR_9 (9 / k)^STEINER_ORDER``, is within 0.8 of the mean relative error ``target``:
     ``PATH_K[0]`` (9) at the default 0.1 % and tighter, 7 from 0.14 %, 5 from 0.26 %, 3 from 0.67 %.
-    Measured on spot's and the cow's head cuts, two scan-like faces, bump and spot by its seams
-    against exact MMP (worst source set, mean): k = 5 0.17-0.53 %, k = 3 0.31-0.57 %."""
+    Measured against exact MMP (the worst source set's mean; docs/geodesic.md, "Error target", 18
+    meshes): k = 5 0.09-0.53 %, k = 3 0.31-0.76 % (1.56 % on saddle's far corner, warned)."""
     for k in sorted(PATH_K):
         if PATH_ERROR_9 * (PATH_K[0] / k) ** STEINER_ORDER <= 0.8 * target:
             return k
