@@ -568,6 +568,7 @@ def plot_mesh(name, results):
         targets = sorted((dict(r, grid='0.1%') if r['method'] == 'ours default' else r
                           for r in results.values() if r['method'] in ('ours target', 'ours default')),
                          key=lambda r: r['query'])
+        ours = [r for r in ours if r['method'] != 'ours default']       # drawn once, on that curve
     for rs, what, mark in ((ours, 'ours', 'o'), (paths, 'ours, surface paths', 'D'),
                            (targets, 'ours, error targets', 's')):
         if not rs:
