@@ -1920,13 +1920,6 @@ class GeodesicSolver:
         islands answered exactly in their plane: ``PlanarChart``), warnings (list of str),
         seconds {rasterise, solve, sample, total} and, for the set-up, flatten. Raises
         ``ConformalError``."""
-        if self.fine is not None:
-            s, pf, pb = _parse_sources(self.n, self.m, sources, points)
-            if len(pf) and self.turned is not None:
-                pb = np.where(self.turned[pf, None], pb[:, ::-1], pb)    # the corners of turned faces
-            return self.fine.distance(self.n, self.m, self.report['refined'], s, pf, pb,
-                                      source_radius=source_radius, calibrate=calibrate, clamp=clamp,
-                                      progress=progress)
         say = progress or (lambda f, msg: None)
         t0 = time.perf_counter()
         if source_radius is None:
@@ -1936,6 +1929,10 @@ class GeodesicSolver:
         s, pf, pb = _parse_sources(self.n, self.m, sources, points)
         if len(pf) and self.turned is not None:
             pb = np.where(self.turned[pf, None], pb[:, ::-1], pb)        # the corners of turned faces
+        if self.fine is not None:                       # the same surface on finer triangles
+            return self.fine.distance(self.n, self.m, self.report['refined'], s, pf, pb,
+                                      source_radius=source_radius, calibrate=calibrate, clamp=clamp,
+                                      progress=progress)
         if len(s) and not self.on_mesh[s].all():
             raise ConformalError(f"source vertex {int(s[~self.on_mesh[s]][0])} is in no triangle")
         is_src = np.isin(self.vert_of, s)                       # split copies of the source vertices
@@ -1989,9 +1986,10 @@ class GeodesicSolver:
                 # unseeded grid chart the most up to PATH_K[0] that fit
                 k0 = _budget_k(ch, self.steiner_points) if self.steiner_points else \
                     ch.paths_k or _budget_k(ch)
-                if not self.steiner_points and target_k(self.error_target) < PATH_K[0]:
+                k_t = target_k(self.error_target)
+                if not self.steiner_points and k_t < PATH_K[0]:
                     # a target looser than the paths' default points need: start from fewer
-                    k0 = min(k0, target_k(self.error_target))
+                    k0 = min(k0, k_t)
                 Xp = np.einsum('kc,kcd->kd', pb[mine], ch.V[ch.F[src_faces]]) if mine.any() else None
                 d, path_est[c], k_used = surface_paths(ch.V, ch.F, loc, k0, X=Xp,
                                                        faces=src_faces if mine.any() else None,
