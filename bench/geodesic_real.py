@@ -14,10 +14,11 @@ disks or disk islands: closed meshes are cut along their OBJ ``vt`` seams when t
 and skipped otherwise (use sphere mode for those). Distances are then on the cut surface, and the
 exact reference is MMP on the same cut surface (its split vertices), restricted to the source's part.
 Head-like disks (stand-ins for the held-out scans): ``--meshes cow-cut spot-cut2 cheburashka-cut1``
-(``meshes.HEAD_CUTS``, then the given number of Loop subdivisions). Scan-like meshes of our own
-(random points with a denser patch, Delaunay-triangulated and lifted, with noise): ``--meshes
-facescan faceholes deepcap`` (``meshes.scan_like``). Closed CAD-like parts of slivers, in sphere mode:
-``--meshes --sphere cylinderhull boxhull`` (``meshes.HULLS``).
+(``meshes.HEAD_CUTS``, then the given number of Loop subdivisions); other plane cuts of the public
+meshes by name (``meshes.PART_CUTS``: ``spot-rear cow-rear cheburashka-half rocker-half ogre-head``).
+Scan-like meshes of our own (random points with a denser patch, Delaunay-triangulated and lifted,
+with noise): ``--meshes facescan faceholes deepcap`` (``meshes.scan_like``). Closed CAD-like parts of
+slivers, in sphere mode: ``--meshes --sphere cylinderhull boxhull`` (``meshes.HULLS``).
 
 Errors: relative to the exact distance, mean and max over the vertices of the source's part farther
 than ``EXCLUDE`` times the part's bounding-box diagonal from the source; a vertex split by a seam counts
@@ -111,6 +112,12 @@ def load(name):
         from core.surfaces import hull_part
         V, F = hull_part(name[:-4])
         return V, F, None
+    from meshes import PART_CUTS
+    if name in PART_CUTS:                   # other plane cuts of the public meshes: 'spot-rear', ...
+        from meshes import cut_disk
+        base, direction, height = PART_CUTS[name]
+        got = load(base)
+        return None if got is None else (*cut_disk(got[0], got[1], direction, height), None)
     if '-cut' in name:                      # head-like disks of bench/cones.py: 'cow-cut', 'spot-cut2', ...
         from meshes import HEAD_CUTS, cut_disk, loop_subdivide
         base, steps = name.split('-cut')

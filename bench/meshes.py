@@ -50,6 +50,12 @@ def loop_subdivide(V, F):
 
 # head-like disks cut from the public meshes (not the held-out scans): direction, height (mesh units)
 HEAD_CUTS = {'spot': ((0, 0, 1), 0.546), 'cow': ((1, 0, 0), 3.2), 'cheburashka': ((0, 1, 0), 0.71)}
+# more plane cuts of the public meshes, by name: (mesh, direction, height). Disks with one or two
+# boundary loops (the rocker arm's and cheburashka's halves are annuli), or several (the ogre's head,
+# five holes); the cow's rear keeps its one non-manifold vertex (two fans touching: a pinch)
+PART_CUTS = {'spot-rear': ('spot', (0, 0, -1), 0.0), 'cow-rear': ('cow', (-1, 0, 0), 0.5),
+             'cheburashka-half': ('cheburashka', (0, 0, 1), 0.5),
+             'rocker-half': ('rocker-arm', (0, 0, 1), 0.1), 'ogre-head': ('ogre', (0, 1, 0), 22.0)}
 
 
 def cut_disk(V, F, direction, height):

@@ -60,7 +60,8 @@ from ..mesh.measures import signed_uv_areas, vertex_mu
 from .planar import plane_coordinates, planar_paths
 from ..atlas.unfold import unfold_flat_disk
 from .paths import (PATH_BUDGET, PATH_ERROR_9, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, SteinerGraph,
-                    path_points, path_triangulation, target_k, thin_warning, steiner_distances, surface_paths)
+                    path_points, path_triangulation, start_k, target_k, thin_warning, steiner_distances,
+                    surface_paths)
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
 METHODS = ('auto', 'grid', 'paths')
@@ -1390,8 +1391,8 @@ def paths_choice(ch, method, grid, mu_mode):
     points it needs, ``target_k``, a query then starting from those, and ``PATH_COST_LOOSE`` links a
     node update, where both methods meet the target and the faster is taken). A link costs about a
     quarter of a node update (spot: 2M links in 0.5 s; a query of its 832-node grid ~1 s for ~1M
-    updates), so the paths run where they take at most about half the march's time, with as many
-    points as that time buys.
+    updates), so the paths run where they take at most about half the march's time, with at most as
+    many points as that time buys (a query starts from the fewer its target needs, ``start_k``).
     That picks small, coarse islands whose map varies a lot, where the automatic grid grows large
     and its estimate is least reliable (suzanne's face: grid 2240, 0.8-1.9 % mean, 10 s a query), and
     leaves fine meshes to the grid (bump at n = 65: 2.7M links at k = 9 against 0.8M updates).
@@ -1408,8 +1409,9 @@ def paths_choice(ch, method, grid, mu_mode):
     if path_points(m, ne, k_min=PATH_K[0]) and path_triangulation(ch.V, ch.F, ch.paths_cache) is not None:
         # thin triangles (needles on a scan's steep flanks): the grid's re-marches undershoot on them
         # and at the boundary beside them (a lifted hemisphere's rim: 2.2 % max, rising with the
-        # grid), and the paths search the intrinsic Delaunay triangulation there (0.62 %)
-        return PATH_K[0]
+        # grid), and the paths search the intrinsic Delaunay triangulation there (0.62 %), from the
+        # points the target needs (the scan-like faces refined from 9 to 11-13 on every query)
+        return path_points(m, ne, k_min=PATH_K[0], k_max=start_k(ch.target)) or PATH_K[0]
     marches = 1 + (ch.planned_passes if mu_mode == 'metric' else 0)
     # (a target looser than the default needs fewer points, ``target_k``: the paths are weighed at those,
     # and taken where they are about as fast as the grid, ``PATH_COST_LOOSE``)
@@ -1986,10 +1988,10 @@ class GeodesicSolver:
                 # unseeded grid chart the most up to PATH_K[0] that fit
                 k0 = _budget_k(ch, self.steiner_points) if self.steiner_points else \
                     ch.paths_k or _budget_k(ch)
-                k_t = target_k(self.error_target)
-                if not self.steiner_points and k_t < PATH_K[0]:
-                    # a target looser than the paths' default points need: start from fewer
-                    k0 = min(k0, k_t)
+                if not self.steiner_points:
+                    # the points the target needs (``start_k``), if fewer than the chart's: the estimate
+                    # of the answer decides whether the query refines
+                    k0 = min(k0, start_k(self.error_target))
                 Xp = np.einsum('kc,kcd->kd', pb[mine], ch.V[ch.F[src_faces]]) if mine.any() else None
                 d, path_est[c], k_used = surface_paths(ch.V, ch.F, loc, k0, X=Xp,
                                                        faces=src_faces if mine.any() else None,
