@@ -1843,9 +1843,13 @@ def test_a_looser_error_target_takes_fewer_steiner_points(bump65):
     estimate, with no warning, and the default starts from more points (``start_k``: 13). A smooth
     surface the grid answers at the default (bump, geodesic_ref_bump_65.npz) is answered at 1 % by the
     paths, which are then about as fast (``PATH_COST_LOOSE``), within the target."""
-    from core.geodesic.paths import target_k
+    from core.geodesic.paths import start_k, target_k
     assert [target_k(t) for t in (1e-4, 1e-3, 1.3e-3, 1.5e-3, 3e-3, 5e-3, 7e-3, 1e-2, 0.05)] == \
         [9, 9, 9, 7, 5, 5, 3, 3, 3]
+    # a query starts from these at looser targets, and at the default and tighter ones from the points
+    # whose expected error is within 0.4 of the target (up to the 31 a chart may take)
+    assert [start_k(t) for t in (1e-5, 1e-4, 5e-4, 1e-3, 1.3e-3, 1.5e-3, 5e-3, 1e-2)] == \
+        [31, 31, 19, 13, 11, 7, 5, 3]
     ref = np.load(os.path.join(DATA, 'geodesic_ref_scan_patch.npz'))
     V, F = ref['V'], ref['F'].astype(np.int64)
     diag = np.linalg.norm(np.ptp(V, axis=0))
