@@ -11,10 +11,12 @@ optionally with iso-line bands), the mesh custom property ``geodesic_distance_ra
 ``conformal_geodesic_report``.
 
 Reuse: the add-on keeps the ``core.geodesic.solver.GeodesicSolver`` of the last few runs in memory
-(flattening, grids and rasterised conformal factor), keyed on a hash of the positions and polygons
-and on the options (boundary mode, grid, seams); the next run on an unchanged mesh with the same
-options only marches. Otherwise a whole-mesh, single-island result of the flatten operator
-(``uv.conformal_flatten``) on the unchanged mesh is used as the map.
+(flattening, grids and rasterised conformal factor), keyed on a hash of the positions and polygons and
+on the options (boundary mode, grid, seams); the next run on an unchanged mesh with the same options
+only marches, and the same sources asked again (a redo that changes only the bands or the colour map)
+are answered from the kept result (``distances_reused`` in the report). Otherwise a whole-mesh,
+single-island result of the flatten operator (``uv.conformal_flatten``) on the unchanged mesh is used as
+the map.
 
 Several parts are one island each (distances are infinite between them: such vertices get 0 in the
 attribute and the no-value grey). With ``use_seams`` the surface is cut along the edges marked as
@@ -25,6 +27,7 @@ Every report carries ``error_estimate`` (mean relative error, from the grid's re
 surface) and ``warnings``; the operator reports a WARNING when that list is not empty. Everything is
 computed before anything is written: on bad input the operator reports the core's message as an ERROR
 and the mesh is untouched."""
+import copy
 import time
 
 import bpy
@@ -100,6 +103,8 @@ def pick_sources(context, obj, md, how, was_edit, active):
 # ----------------------------------------------------------------------------------------------
 SOLVER_CACHE_SIZE = 4
 _solvers = {}          # cache key -> GeodesicSolver, most recently used last
+RESULT_CACHE_SIZE = 8
+_results = {}          # (id of a kept solver, its sources) -> (dist, report), most recently used last
 
 
 def solver_key(digest, boundary, grid, use_seams, seams, error_target=ERROR_TARGET):
@@ -121,16 +126,43 @@ def cached_solver(key):
 
 
 def keep_solver(key, gs):
-    """Keep ``gs`` for ``key``, dropping the least recently used beyond ``SOLVER_CACHE_SIZE``."""
-    _solvers.pop(key, None)
+    """Keep ``gs`` for ``key``, dropping the least recently used beyond ``SOLVER_CACHE_SIZE`` (and the
+    results of a solver no longer kept)."""
+    old = _solvers.pop(key, None)
+    if old is not None and old is not gs:
+        _forget_results(old)
     _solvers[key] = gs
     while len(_solvers) > SOLVER_CACHE_SIZE:
-        _solvers.pop(next(iter(_solvers)))
+        _forget_results(_solvers.pop(next(iter(_solvers))))
 
 
 def clear_solvers():
-    """Forget every kept solver (on unregister, and for tests)."""
+    """Forget every kept solver and result (on unregister, and for tests)."""
     _solvers.clear()
+    _results.clear()
+
+
+def _forget_results(gs):
+    """Drop the kept results of the solver ``gs`` (it is no longer kept: its id may be reused)."""
+    for key in [k for k in _results if k[0] == id(gs)]:
+        del _results[key]
+
+
+def solver_distance(gs, sources, progress=None):
+    """``gs.distance(sources)`` for a kept solver (``keep_solver``), and whether it was reused: the
+    same solver asked the same source vertices again (a redo that changes only the bands or the colour
+    map) answers from its last results, at most ``RESULT_CACHE_SIZE`` in all, without marching again.
+    Returns ``(dist (n,), report, reused)``; both are copies."""
+    key = (id(gs), np.unique(np.asarray(sources, np.int64)).tobytes())
+    got = _results.pop(key, None)
+    reused = got is not None
+    if not reused:
+        dist, rep = gs.distance(sources, progress=progress)
+        got = (dist.copy(), copy.deepcopy(rep))
+    _results[key] = got                          # most recently used last
+    while len(_results) > RESULT_CACHE_SIZE:
+        _results.pop(next(iter(_results)))
+    return got[0].copy(), copy.deepcopy(got[1]), reused
 
 
 def flatten_operator_uv(me, md, boundary, digest):
@@ -229,7 +261,10 @@ def geodesic_object(context, obj=None, source='AUTO', grid=0, boundary='UNIFORM'
                                 progress=lambda f, m: say(0.5 * f, m), error_target=error_target)
         t_setup = time.perf_counter() - t
         lo_p = 0.5 if origin != 'geodesic cache' else 0.05
-        dist, rep = gs.distance(sources, progress=lambda f, m: say(lo_p + (0.95 - lo_p) * f, m))
+        t = time.perf_counter()
+        dist, rep, reused = solver_distance(gs, sources,
+                                            progress=lambda f, m: say(lo_p + (0.95 - lo_p) * f, m))
+        t_query = time.perf_counter() - t
         # --- everything computed: write
         ok = np.isfinite(dist)
         meshio.write_point_float(me, ATTR_NAME, np.where(ok, dist, 0.0))
@@ -257,8 +292,9 @@ def geodesic_object(context, obj=None, source='AUTO', grid=0, boundary='UNIFORM'
             'unreached_vertices': int((~ok & md_used(md)).sum()), 'use_seams': bool(use_seams),
             'error_estimate': rep['error_estimate'], 'error_target': rep['error_target'],
             'clamped': rep['clamped'], 'warnings': list(rep['warnings']),
+            'distances_reused': reused,
             'seconds': {'flatten': round(t_setup if origin != 'geodesic cache' else 0.0, 4),
-                        'geodesic': rep['seconds'].get('total'),
+                        'geodesic': round(t_query, 4),
                         'total': round(time.perf_counter() - t0, 4)},
             'core_seconds': rep['seconds'],
         }
@@ -278,7 +314,8 @@ def summary_line(r):
     """One line for the status bar."""
     solver = "scikit-fmm" if r['solver'] == 'skfmm' else "numpy sweeping"
     reached, paths = r.get('islands_reached'), r.get('paths_islands', 0)
-    flat = "reused flattening" if r['flattening'] != 'computed' else f"flattened ({r['boundary'].lower()})"
+    flat = "reused distances" if r.get('distances_reused') else "reused flattening" \
+        if r['flattening'] != 'computed' else f"flattened ({r['boundary'].lower()})"
     if r.get('planar_islands') == reached:
         how = "exact (flat mesh, no grid)"
     elif paths == reached and r.get('steiner_points'):

@@ -155,7 +155,12 @@ def test_bands_change_only_the_colours(addon, bl):
     bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA', bands=0)
     plain = point_attr(me, 'geodesic_distance_color', 4, 'color').copy()
     d0 = point_attr(me, 'geodesic_distance').copy()
+    assert report_of(me)['distances_reused'] is False
     bpy.ops.mesh.conformal_geodesic_distance(grid=256, boundary='AREA', bands=8)
+    # the same solver and the same source: the distances come from the kept result, not a new march
+    assert report_of(me)['distances_reused'] is True
+    from conformal_flatten.addon.ops_geodesic import summary_line
+    assert 'reused distances' in summary_line(report_of(me))
     banded = point_attr(me, 'geodesic_distance_color', 4, 'color')
     np.testing.assert_allclose(point_attr(me, 'geodesic_distance'), d0, rtol=1e-5, atol=1e-6)
     darker = (banded[:, :3] < plain[:, :3] - 1e-4).all(1)
@@ -224,6 +229,7 @@ def test_solver_is_kept_for_a_second_source(addon, bl, monkeypatch):
                                                         source='CURSOR') == {'FINISHED'}
         d = point_attr(me, 'geodesic_distance')
         assert int(np.argmin(d)) == k
+        assert report_of(me)['distances_reused'] is False          # a new source marches
     assert calls == {'flatten': 1, 'rasterise': 1}
     assert report_of(me)['flattening'] == 'geodesic cache'
     assert '.conformal_geodesic_uv' not in me.attributes          # a solver is kept, not a UV map
