@@ -1835,6 +1835,24 @@ def test_collinear_corners_get_a_finite_metric():
     assert np.all(d <= upper * (1 + 1e-3))
 
 
+def test_default_weighs_the_paths_at_the_points_a_query_starts_from():
+    """At the default target 'auto' weighs the surface paths against the grid at the points a query
+    starts from (``start_k``: 13 and Richardson's 6), at ``PATH_COST_LOOSE`` links a node update of
+    the march: a chart whose k = 9 pair is over ``PATH_COST`` links a node update but whose 13-point
+    pair is within the looser ratio takes the paths at 13 (cheburashka's head cut: 17x heat's one shot
+    on its 1216 grid, 6.1x by the paths); one whose 13-point pair is not keeps the grid."""
+    from types import SimpleNamespace
+    V, F = make_surface('bump', 33)                     # 2048 triangles: 13-point pair 1.44M links
+
+    def chart(nodes):
+        return SimpleNamespace(V=V, F=np.asarray(F), target=geo.ERROR_TARGET, nodes=nodes, planned_passes=1,
+                               excess=0.0, limit=None, grid_estimate=None, paths_cache={})
+    assert geo.paths_choice(chart(150_000.0), 'auto', None, 'metric') == 13    # 1.8M allowed
+    assert geo.paths_choice(chart(100_000.0), 'auto', None, 'metric') is None  # 1.2M allowed: the grid
+    assert geo.paths_choice(chart(200_000.0), 'auto', None, 'metric') == 9     # k = 9 within PATH_COST
+    assert geo.paths_choice(chart(150_000.0), 'grid', None, 'metric') is None
+
+
 def test_a_looser_error_target_takes_fewer_steiner_points(bump65):
     """``error_target`` trades accuracy for time downward too: the surface paths start from the fewest
     points whose expected error meets it (``target_k``: 9 at the default 0.1 %, 5 at 0.5 %, 3 at 1 %;
