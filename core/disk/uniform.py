@@ -64,13 +64,20 @@ class _RowLP:
                       np.where(np.isfinite(self.hi), self.hi, inf))
             h.changeColsCost(k, np.arange(k, dtype=np.int32), self.cost)
 
-    def add_rows(self, A, row_lo, row_hi):
-        """Add the rows ``row_lo <= A x <= row_hi``; A (r,k) dense or sparse, bounds (r,) (+-inf)."""
+    def add_rows(self, A, row_lo, row_hi, n_cols=None):
+        """Add the rows ``row_lo <= A x <= row_hi``; A (r,k) dense or sparse, or the CSR arrays
+        ``(starts (r,), index, value)`` of its nonzeros (then ``n_cols`` is k); bounds (r,) (+-inf)."""
         row_lo, row_hi = np.asarray(row_lo, float), np.asarray(row_hi, float)
+        if isinstance(A, tuple):
+            starts, index, value = A
+            if self.h is None:
+                A = sp.csr_matrix((value, index, np.r_[starts, len(value)]), shape=(len(starts), n_cols))
         self.blocks.append((A, row_lo, row_hi))
         if self.h is None:
             return
-        if sp.issparse(A):
+        if isinstance(A, tuple):
+            pass
+        elif sp.issparse(A):
             A = sp.csr_matrix(A)
             starts, index, value = A.indptr[:-1].astype(np.int32), A.indices.astype(np.int32), A.data
         else:                                  # dense rows: CSR arrays without scipy's checks
@@ -134,20 +141,30 @@ def boundary_basis(system, n_freq):
 
 
 class _MinmaxLP:
-    """min (t1 - t0) [+ reg . |a - c|] s.t. t0 <= s_i + J_i (a - c) <= t1 for the rows added so far and
-    |a - c| <= delta (a box: the trust region), with rows arriving in rounds (``_RowLP``). J (r,K),
-    s (r,), c (K,). Without ``reg_w`` the variables are d = a - c (bounded), t1, t0; with it
-    d = d+ - d-."""
+    """min (t1 - t0) [+ reg . e] s.t. t0 <= s_i + J_i d <= t1 for the rows added so far, with d = a - c
+    inside the box ``|d| <= delta`` (the trust region) and, with ``reg_w``, ``e >= |d|`` (two rows of
+    two entries each per coefficient), rows arriving in rounds (``_RowLP``). J (r,K), s (r,), c (K,).
+    Variables d (K), [e (K),] t1, t0: each face row holds K + 1 entries (the split d = d+ - d- would
+    double them, and HiGHS's work per pivot grows with them)."""
 
     def __init__(self, K, c, delta, reg_w):
         self.K, self.c, self.reg = K, c, reg_w is not None
+        box = np.full(K, float(delta))
         if reg_w is None:
-            cost, lo, hi = np.r_[np.zeros(K), 1.0, -1.0], np.r_[np.full(K, -delta), -np.inf, -np.inf], \
-                np.r_[np.full(K, delta), np.inf, np.inf]
+            cost, lo, hi = np.r_[np.zeros(K), 1.0, -1.0], np.r_[-box, -np.inf, -np.inf], \
+                np.r_[box, np.inf, np.inf]
         else:
-            cost, lo, hi = np.r_[reg_w, reg_w, 1.0, -1.0], np.r_[np.zeros(2 * K), -np.inf, -np.inf], \
-                np.r_[np.full(2 * K, delta), np.inf, np.inf]
+            cost, lo, hi = np.r_[np.zeros(K), reg_w, 1.0, -1.0], np.r_[-box, np.zeros(K), -np.inf, -np.inf], \
+                np.r_[box, box, np.inf, np.inf]
         self.lp = _RowLP(cost, lo, hi)
+        self.t1 = len(cost) - 2
+        if self.reg:                    # e - d >= 0 and e + d >= 0
+            k = np.arange(K)
+            cols = np.r_[k, K + k, k, K + k]
+            rows = np.r_[k, k, K + k, K + k]
+            vals = np.r_[-np.ones(K), np.ones(K), np.ones(K), np.ones(K)]
+            self.lp.add_rows(sp.csr_matrix((vals, (rows, cols)), shape=(2 * K, len(cost))),
+                             np.zeros(2 * K), np.full(2 * K, np.inf))
 
     def add(self, s, J, side):
         """Add one side of the rows of faces with model values ``s`` (r,) and responses ``J`` (r,K):
@@ -155,22 +172,26 @@ class _MinmaxLP:
         r = len(s)
         if r == 0:
             return
-        one, zero = np.ones((r, 1)), np.zeros((r, 1))
-        D = J if not self.reg else np.hstack([J, -J])
+        K = self.K
+        index = np.empty((r, K + 1), np.int32)
+        index[:, :K] = np.arange(K, dtype=np.int32)
+        index[:, K] = self.t1 if side > 0 else self.t1 + 1
+        value = np.empty((r, K + 1))
+        value[:, :K] = J
+        value[:, K] = -1.0
+        A = (np.arange(0, r * (K + 1), K + 1, dtype=np.int32), index.ravel(), value.ravel())
         if side > 0:
-            self.lp.add_rows(np.hstack([D, -one, zero]), np.full(r, -np.inf), -s)
+            self.lp.add_rows(A, np.full(r, -np.inf), -s, n_cols=len(self.lp.cost))
         else:
-            self.lp.add_rows(np.hstack([D, zero, -one]), -s, np.full(r, np.inf))
+            self.lp.add_rows(A, -s, np.full(r, np.inf), n_cols=len(self.lp.cost))
 
     def solve(self):
         """(a (K,), predicted spread) at the optimum, or (None, None)."""
         x = self.lp.solve()
         if x is None:
             return None, None
-        K = self.K
-        d = x[:K] if not self.reg else x[:K] - x[K:2 * K]
         self.bounds = x[-2], x[-1]
-        return self.c + d, x[-2] - x[-1]
+        return self.c + x[:self.K], x[-2] - x[-1]
 
 
 def _model_lp(s, JF, c, delta, reg_w, active=200, max_rounds=6, max_add=1000, seed=16, batch=64, tol=1e-9):
@@ -414,15 +435,15 @@ def vertex_bound(system, tol=1e-9, batch=32, max_rounds=100, real_faces=None, fl
     order = np.argsort(uI)
     order = order[counted[order]]
     inside = {1: np.zeros(nI, bool), -1: np.zeros(nI, bool)}
-    # variables uB (nb), t1, t0; minimise t1 - t0 subject to t0 <= uB <= t1 and t0 <= u_i <= t1 for
-    # the interior vertices taken in so far: the upper row of a vertex once it is above t1, the lower
-    # once below t0 (starting from the ``start`` highest and lowest of the area map)
+    # variables uB (nb), t1; minimise t1 subject to 0 <= uB <= t1 and 0 <= u_i <= t1 for the interior
+    # vertices taken in so far: the upper row of a vertex once it is above t1, the lower once below 0
+    # (starting from the ``start`` highest and lowest of the area map). The lower end is pinned at 0
+    # without loss: the harmonic extension of a constant is that constant (the rows of L sum to 0), so
+    # shifting uB shifts every u_i, and ``0 <= uB`` is a bound on the variables instead of nb rows
     inf = np.inf
-    lp = _RowLP(np.r_[np.zeros(nb), 1.0, -1.0], np.full(nb + 2, -inf), np.full(nb + 2, inf))
-    Ib = sp.identity(nb, format='csr')
-    one_b, zero_b = sp.csr_matrix(np.ones((nb, 1))), sp.csr_matrix((nb, 1))
-    lp.add_rows(sp.vstack([sp.hstack([Ib, -one_b, zero_b]), sp.hstack([Ib, zero_b, -one_b])]),
-                np.r_[np.full(nb, -inf), np.zeros(nb)], np.r_[np.zeros(nb), np.full(nb, inf)])
+    lp = _RowLP(np.r_[np.zeros(nb), 1.0], np.zeros(nb + 1), np.full(nb + 1, inf))
+    lp.add_rows(sp.hstack([sp.identity(nb, format='csr'), sp.csr_matrix(-np.ones((nb, 1)))]).tocsr(),
+                np.full(nb, -inf), np.zeros(nb))
 
     def add(hi, lo):
         """Take in the upper rows of the vertices ``hi`` and the lower rows of ``lo``."""
@@ -435,15 +456,15 @@ def vertex_bound(system, tol=1e-9, batch=32, max_rounds=100, real_faces=None, fl
             K = len(which)
             Rw = rows[np.searchsorted(idx, which)]
             if side > 0:
-                lp.add_rows(np.hstack([Rw, -np.ones((K, 1)), np.zeros((K, 1))]), np.full(K, -inf), -uI[which])
+                lp.add_rows(np.hstack([Rw, -np.ones((K, 1))]), np.full(K, -inf), -uI[which])
             else:
-                lp.add_rows(np.hstack([Rw, np.zeros((K, 1)), -np.ones((K, 1))]), -uI[which], np.full(K, inf))
+                lp.add_rows(np.hstack([Rw, np.zeros((K, 1))]), -uI[which], np.full(K, inf))
     add(order[-start:], order[:start])
     for _ in range(max_rounds):
         x = lp.solve()
         if x is None:
             raise ConformalError("the bound's linear program failed", 'solve_failed')
-        uB, t1, t0 = x[:nb], x[nb], x[nb + 1]
+        uB, t1, t0 = x[:nb], x[nb], 0.0
         u = uI + _harmonic_interior(system, uB)
         new = []
         for side, viol in ((1, u - t1), (-1, t0 - u)):
