@@ -130,26 +130,28 @@ def fill_holes(V, F, loops, rings=None):
 def hole_cut_paths(V, F, n, loops, inner=None):
     """Edge paths that cut every hole open to the outer boundary, for ``holes='cut'``.
 
-    Hole by hole, the shortest path (3D edge lengths, Dijkstra from all outer-loop vertices) to the
+    Hole by hole, the shortest path (3D edge lengths, Dijkstra from the outer boundary) to the
     nearest vertex of another loop is cut, which merges that hole into the outer boundary. An edge of
     ``inner`` (k,2 vertex pairs: polygons' diagonals) costs the total length on top (a cut through a
-    polygon gives its corners two UVs). Returns a list of (k,2) int64 vertex pairs of ``F``'s vertex
-    ids (one per hole)."""
+    polygon gives its corners two UVs). ``loops``: the boundary loops of ``F``, longest (the outer)
+    first (``topology.boundary_loops``). Returns a list of (k,2) int64 vertex pairs (one per hole).
+
+    The searches run on the uncut mesh: once a hole is merged, its loop and its path join the sources
+    (distance 0). A shortest path from the sources never passes through a source, so it never
+    crosses an earlier cut, and its length is the one it has on the mesh cut so far."""
     paths = []
-    Fc, vmap = F, np.arange(n)
-    for _ in range(len(loops) - 1):
-        nc = int(Fc.max()) + 1
-        cur = topology.boundary_loops(Fc, nc)
-        if len(cur) <= 1:
-            break
-        E, _ = topology.unique_edges(Fc)
-        Vc = V[vmap]
-        wgt = avoiding(np.linalg.norm(Vc[E[:, 0]] - Vc[E[:, 1]], axis=1), np.sort(vmap[E], 1), inner, n)
-        G = sp.coo_matrix((wgt, (E[:, 0], E[:, 1])), shape=(nc, nc)).tocsr()
-        outer = cur[0]
-        dist, pred, _ = dijkstra(G, directed=False, indices=outer, min_only=True,
+    if len(loops) <= 1:
+        return paths
+    E, _ = topology.unique_edges(F)
+    wgt = avoiding(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1), E, inner, n)
+    G = sp.coo_matrix((wgt, (E[:, 0], E[:, 1])), shape=(n, n)).tocsr()
+    source = np.zeros(n, bool)
+    source[loops[0]] = True
+    left = list(loops[1:])
+    while left:
+        dist, pred, _ = dijkstra(G, directed=False, indices=np.flatnonzero(source), min_only=True,
                                  return_predecessors=True)
-        holes = np.concatenate(cur[1:])
+        holes = np.concatenate(left)
         t = int(holes[np.argmin(dist[holes])])
         if not np.isfinite(dist[t]):
             break
@@ -157,10 +159,12 @@ def hole_cut_paths(V, F, n, loops, inner=None):
         while pred[path[-1]] >= 0:
             path.append(int(pred[path[-1]]))
         path = np.array(path[::-1], np.int64)
-        pairs = np.stack([path[:-1], path[1:]], 1)
-        paths.append(vmap[pairs])
-        cut = cut_along_seams(Fc, nc, pairs)
-        Fc, vmap = cut.F, vmap[cut.vert_of]
+        paths.append(np.stack([path[:-1], path[1:]], 1))
+        source[path] = True
+        merged = [lp for lp in left if (lp == t).any()]
+        for lp in merged:
+            source[lp] = True
+        left = [lp for lp in left if not (lp == t).any()]
     return paths
 
 
