@@ -256,6 +256,51 @@ def test_holes_cut_and_error_modes():
         unwrap(V, F, boundary='area', holes='error')
 
 
+def test_hole_cut_paths_are_those_of_the_mesh_cut_so_far():
+    """The holes' paths come from searches on the uncut mesh, with the merged holes and the earlier paths
+    as sources. A hole nearer another hole than the rim takes its path to that hole once it is merged;
+    the paths are those of searches on the mesh cut hole by hole (the definition), and cutting along
+    them leaves one boundary loop."""
+    from scipy.sparse.csgraph import dijkstra
+    import scipy.sparse as sp
+    from meshgen import compact
+    from core import make_surface
+    from core.atlas.islands import hole_cut_paths
+    V, F = make_surface('bump', 41)
+    centres = [(-0.5, 0.0), (-0.05, 0.05), (0.4, -0.1), (0.1, 0.55)]
+    inside = np.zeros(len(V), bool)
+    for cx, cy in centres:
+        inside |= np.hypot(V[:, 0] - cx, V[:, 1] - cy) < 0.13
+    V, F = compact(V, F[~inside[F].any(1)])
+    n = len(V)
+    loops = topology.boundary_loops(F, n)
+    assert len(loops) == 5
+    paths = hole_cut_paths(V, F, n, loops)
+    want, Fc, vmap = [], F, np.arange(n)               # hole by hole on the mesh cut so far
+    for _ in range(len(loops) - 1):
+        nc = int(Fc.max()) + 1
+        cur = topology.boundary_loops(Fc, nc)
+        E, _ = topology.unique_edges(Fc)
+        G = sp.coo_matrix((np.linalg.norm(V[vmap[E[:, 0]]] - V[vmap[E[:, 1]]], axis=1), (E[:, 0], E[:, 1])),
+                          shape=(nc, nc)).tocsr()
+        dist, pred, _ = dijkstra(G, directed=False, indices=cur[0], min_only=True, return_predecessors=True)
+        holes = np.concatenate(cur[1:])
+        path = [int(holes[np.argmin(dist[holes])])]
+        while pred[path[-1]] >= 0:
+            path.append(int(pred[path[-1]]))
+        pairs = np.stack([path[::-1][:-1], path[::-1][1:]], 1)
+        want.append(vmap[pairs])
+        cut = cut_along_seams(Fc, nc, pairs)
+        Fc, vmap = cut.F, vmap[cut.vert_of]
+    assert len(paths) == len(want) == 4
+    for got, ref in zip(paths, want):
+        np.testing.assert_array_equal(got, ref)
+    rim = set(loops[0].tolist())
+    assert any(int(p[0, 0]) not in rim for p in paths)     # some path starts at a merged hole or path
+    cut = cut_along_seams(F, n, np.concatenate(paths))
+    assert cut.n_islands == 1 and len(topology.boundary_loops(cut.F, len(cut.vert_of))) == 1
+
+
 # --- Suzanne ------------------------------------------------------------------------------------
 @pytest.fixture(scope='module')
 def suzanne():
