@@ -36,16 +36,23 @@ def twin_halfedges(F, n):
     One sort of the undirected keys pairs the two half-edges of each edge (no search: half the time
     at 70k triangles); where an edge has more than two, the reverse of each is searched for instead."""
     F = np.asarray(F, np.int64)
-    key, order, starts, counts = _sorted_edge_keys(F, n)
+    _, order, starts, counts = _sorted_edge_keys(F, n)
     if len(counts) and counts.max() > 2:
         return _twin_by_search(F, n)
-    twin = np.full(len(key), -1, np.int64)
+    return _paired(F, order, starts, counts)[0]
+
+
+def _paired(F, order, starts, counts):
+    """From the sorted undirected half-edge keys of ``F`` (m,3) (``_sorted_edge_keys``): ``twin``
+    (3m,), the other half-edge of each edge of two half-edges running opposite ways, else -1, and how
+    many edges have two half-edges running the same way."""
+    twin = np.full(3 * len(F), -1, np.int64)
     pair = starts[counts == 2]
     h0, h1 = order[pair], order[pair + 1]
     u = F.ravel()
-    opposite = u[h0] != u[h1]
-    twin[h0[opposite]], twin[h1[opposite]] = h1[opposite], h0[opposite]
-    return twin
+    same = u[h0] == u[h1]
+    twin[h0[~same]], twin[h1[~same]] = h1[~same], h0[~same]
+    return twin, int(same.sum())
 
 
 def _twin_by_search(F, n):
@@ -79,16 +86,11 @@ def edge_table(F, n):
     more than two triangles and ``same_way`` is 0); ``same_way`` how many edges have two half-edges
     running the same way (inconsistent orientation). Half-edge 3t+k runs from F[t,k] to F[t,k+1]."""
     F = np.asarray(F, np.int64)
-    u = F.ravel()
     key, order, starts, counts = _sorted_edge_keys(F, n)
     ukey = key[order][starts]
     E = np.stack([ukey // n, ukey % n], axis=1)
-    twin = np.full(len(key), -1, np.int64)
-    pair = starts[counts == 2]
-    h0, h1 = order[pair], order[pair + 1]
-    same = u[h0] == u[h1]
-    twin[h0[~same]], twin[h1[~same]] = h1[~same], h0[~same]
-    return E, counts, twin, int(same.sum())
+    twin, same_way = _paired(F, order, starts, counts)
+    return E, counts, twin, same_way
 
 
 def _sorted_edge_keys(F, n):
