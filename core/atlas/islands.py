@@ -161,10 +161,10 @@ def hole_cut_paths(V, F, n, loops, inner=None):
         path = np.array(path[::-1], np.int64)
         paths.append(np.stack([path[:-1], path[1:]], 1))
         source[path] = True
-        merged = [lp for lp in left if (lp == t).any()]
-        for lp in merged:
+        hit = [bool((lp == t).any()) for lp in left]          # the hole(s) the path reached
+        for lp in (lp for lp, h in zip(left, hit) if h):
             source[lp] = True
-        left = [lp for lp in left if not (lp == t).any()]
+        left = [lp for lp, h in zip(left, hit) if not h]
     return paths
 
 

@@ -64,19 +64,12 @@ class _RowLP:
                       np.where(np.isfinite(self.hi), self.hi, inf))
             h.changeColsCost(k, np.arange(k, dtype=np.int32), self.cost)
 
-    def add_rows(self, A, row_lo, row_hi, n_cols=None):
+    def add_rows(self, A, row_lo, row_hi):
         """Add the rows ``row_lo <= A x <= row_hi``; A (r,k) dense or sparse, or the CSR arrays
-        ``(starts (r,), index, value)`` of its nonzeros (then ``n_cols`` is k); bounds (r,) (+-inf)."""
+        ``(starts (r,), index, value)`` of its nonzeros; bounds (r,) (+-inf)."""
         row_lo, row_hi = np.asarray(row_lo, float), np.asarray(row_hi, float)
         if isinstance(A, tuple):
             starts, index, value = A
-            if self.h is None:
-                A = sp.csr_matrix((value, index, np.r_[starts, len(value)]), shape=(len(starts), n_cols))
-        self.blocks.append((A, row_lo, row_hi))
-        if self.h is None:
-            return
-        if isinstance(A, tuple):
-            pass
         elif sp.issparse(A):
             A = sp.csr_matrix(A)
             starts, index, value = A.indptr[:-1].astype(np.int32), A.indices.astype(np.int32), A.data
@@ -86,6 +79,10 @@ class _RowLP:
             starts = np.arange(0, r * k, k, dtype=np.int32)
             index = np.tile(np.arange(k, dtype=np.int32), r)
             value = np.ascontiguousarray(A).ravel()
+        if self.h is None:                     # kept for linprog, which takes them all at each solve
+            self.blocks.append((sp.csr_matrix((value, index, np.r_[starts, len(value)]),
+                                              shape=(len(starts), len(self.cost))), row_lo, row_hi))
+            return
         inf = self._highs.kHighsInf
         self.h.addRows(len(row_lo), np.where(np.isfinite(row_lo), row_lo, -inf),
                        np.where(np.isfinite(row_hi), row_hi, inf), len(value), starts, index, value)
@@ -181,9 +178,9 @@ class _MinmaxLP:
         value[:, K] = -1.0
         A = (np.arange(0, r * (K + 1), K + 1, dtype=np.int32), index.ravel(), value.ravel())
         if side > 0:
-            self.lp.add_rows(A, np.full(r, -np.inf), -s, n_cols=len(self.lp.cost))
+            self.lp.add_rows(A, np.full(r, -np.inf), -s)
         else:
-            self.lp.add_rows(A, -s, np.full(r, np.inf), n_cols=len(self.lp.cost))
+            self.lp.add_rows(A, -s, np.full(r, np.inf))
 
     def solve(self):
         """(a (K,), predicted spread) at the optimum, or (None, None)."""
