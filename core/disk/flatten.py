@@ -91,6 +91,7 @@ class DiskSystem:
         mask[self.B] = True
         self.I = np.nonzero(~mask)[0]
         self.A = face_areas(V, F)
+        self._frames = None                    # every map is measured: made while factorising
         T = None
         self.operators = {'mode': operators, 'intrinsic': False}
         if operators != 'extrinsic':
@@ -127,16 +128,18 @@ class DiskSystem:
             # overlap, FactorJob; below: on two threads at once)
             order = fill_order(V, self.L)
             self._II, self._neumann = factor_all(self.L_II, self.L[keep][:, keep], defer_last=True,
-                                                 orders=(sub_order(order, self.I), sub_order(order, keep)))
+                                                 orders=(sub_order(order, self.I), sub_order(order, keep)),
+                                                 meanwhile=self._make_frames)
         else:
             self._II = Factor(self.L_II) if len(self.I) else None
             self._neumann = None
         self.Omega = np.where(mask, 0.0, 2 * np.pi - s)
         self.k = np.pi - s[self.B]
         self.l = np.linalg.norm(V[np.roll(self.B, -1)] - V[self.B], axis=1)
-        self._frames = None
-        if isinstance(self._neumann, FactorJob):
-            self._frames, _ = local_frames(V, F)   # needed to measure any map: made while the job runs
+
+    def _make_frames(self):
+        """The triangles' own frames (``local_frames``), for the Jacobians of every map measured."""
+        self._frames, _ = local_frames(self.V, self.F)
 
     @property
     def conjugate_pending(self):

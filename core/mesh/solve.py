@@ -85,7 +85,7 @@ def backend(size=None):
     return 'superlu'
 
 
-def factor_all(*matrices, orders=None, defer_last=False):
+def factor_all(*matrices, orders=None, defer_last=False, meanwhile=None):
     """``Factor`` of each matrix (with ``orders``: one fill-reducing order or None per matrix).
     SuperLU releases the GIL, and so does CHOLMOD's numeric factorisation where ``cholmod_block``
     reaches it (cvxopt's own ``numeric`` holds it: then CHOLMOD's factorisations run in turn). Such
@@ -98,7 +98,11 @@ def factor_all(*matrices, orders=None, defer_last=False):
     run in turn and the last one on its own thread, coming back as a ``FactorJob`` (``result()``
     gives its Factor), so the caller's work with the others (solves, numpy; both release the GIL)
     overlaps it (CHOLMOD at 1M triangles: 6.1 -> 5.7 s in the add-on, docs/scale.md "Twentieth
-    round")."""
+    round").
+
+    ``meanwhile``: optional callable (no arguments, result discarded) run on the calling thread while
+    factorisations run on threads (after the last one is started), else after them: work the caller
+    needs anyway (8k triangles: the 2-3 ms of a disk's triangle frames, docs/scale.md)."""
     orders = list(orders) if orders is not None else [None] * len(matrices)
     if len(orders) != len(matrices):
         raise ConformalError(f"{len(orders)} orders for {len(matrices)} matrices")
@@ -106,13 +110,20 @@ def factor_all(*matrices, orders=None, defer_last=False):
     rows = sum(K.shape[0] for K in matrices)
     free = all(m == 'superlu' or BlockSolver.load() is not None for m in methods)
     in_turn = WORKERS < 2 or len(matrices) < 2 or not free
+    meanwhile = meanwhile or (lambda: None)
     if in_turn or not PARALLEL_MIN <= rows <= PARALLEL_MAX:
         if defer_last and not in_turn and rows > PARALLEL_MAX:
             done = [Factor(K, order=o) for K, o in zip(matrices[:-1], orders[:-1])]
-            return done + [FactorJob(matrices[-1], order=orders[-1])]
-        return [Factor(K, order=o) for K, o in zip(matrices, orders)]
+            job = FactorJob(matrices[-1], order=orders[-1])
+            meanwhile()
+            return done + [job]
+        done = [Factor(K, order=o) for K, o in zip(matrices, orders)]
+        meanwhile()
+        return done
     with ThreadPoolExecutor(min(WORKERS, len(matrices))) as ex:
-        return list(ex.map(lambda ko: Factor(ko[0], order=ko[1]), zip(matrices, orders)))
+        jobs = [ex.submit(Factor, K, order=o) for K, o in zip(matrices, orders)]
+        meanwhile()
+        return [j.result() for j in jobs]
 
 
 class FactorJob(Background):
