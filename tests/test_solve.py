@@ -341,3 +341,34 @@ def test_deferred_factor_in_turn_gives_the_same_map(monkeypatch, method):
     job = solve.FactorJob(sp.csc_matrix((3, 3)))
     with pytest.raises(ConformalError):
         job.result()
+
+
+@pytest.mark.parametrize('branch', ['threads', 'in_turn', 'deferred'])
+def test_factor_all_runs_meanwhile_once_and_factors_the_same(monkeypatch, branch):
+    """``factor_all(meanwhile=...)`` calls it exactly once on the calling thread, whichever way the
+    factorisations run (two threads at once, in turn, the last deferred), and the factors solve as the
+    ones made alone; the disk system's triangle frames made that way are those made afterwards."""
+    K = _interior_laplacian('bump', 33)
+    K2 = (K + sp.identity(K.shape[0])).tocsc()
+    monkeypatch.setattr(solve, 'WORKERS', 2)
+    if branch == 'threads':
+        monkeypatch.setattr(solve, 'PARALLEL_MIN', 10)
+    elif branch == 'in_turn':
+        monkeypatch.setattr(solve, 'PARALLEL_MIN', 10 ** 9)
+    else:
+        monkeypatch.setattr(solve, 'PARALLEL_MAX', 100)
+    import threading
+    calls = []
+    fs = solve.factor_all(K, K2, defer_last=True, meanwhile=lambda: calls.append(threading.get_ident()))
+    assert calls == [threading.get_ident()]
+    assert isinstance(fs[1], solve.FactorJob) == (branch == 'deferred')
+    fs = [f.result() if isinstance(f, solve.FactorJob) else f for f in fs]
+    b = np.random.default_rng(3).standard_normal(K.shape[0])
+    for M, f in zip((K, K2), fs):
+        assert np.abs(f.solve(b) - solve.Factor(M).solve(b)).max() < 1e-10 * np.abs(b).max()
+    V, F = make_surface('bump', 33)
+    system = DiskSystem(normalise_scale(V)[0], F, check_mesh(V, F, kind='disk').boundary)
+    made = system._frames
+    system._frames = None
+    system._make_frames()
+    assert made is not None and all(np.array_equal(x, y) for x, y in zip(made, system._frames))
