@@ -657,16 +657,19 @@ def _chart_time(inv_mu, valid, S, P, h, inside=None, metric=None):
         D = P - S
         K = int(np.clip(np.ceil(2 * np.linalg.norm(D, axis=1).max()), 1, 256))
         L = np.zeros(len(S))
-        for k in range(K):
-            Q = S + ((k + 0.5) / K) * D
-            i = np.clip(np.rint(Q[:, 1]).astype(np.int64), 0, ny - 1)
-            j = np.clip(np.rint(Q[:, 0]).astype(np.int64), 0, nx - 1)
+        du = D * (h / K)
+        block = max(1, 1_000_000 // len(S))                  # pieces at once (k, len(S))
+        for k0 in range(0, K, block):
+            frac = (np.arange(k0, min(K, k0 + block)) + 0.5) / K
+            Q = S[None] + frac[:, None, None] * D[None]
+            i = np.clip(np.rint(Q[..., 1]).astype(np.int64), 0, ny - 1)
+            j = np.clip(np.rint(Q[..., 0]).astype(np.int64), 0, nx - 1)
             f = face[i, j]
             g = gmet[np.maximum(f, 0)]
-            du = D * (h / K)
-            seg = np.sqrt(g[:, 0] * du[:, 0] ** 2 + 2 * g[:, 1] * du[:, 0] * du[:, 1]
-                          + g[:, 2] * du[:, 1] ** 2)
-            L += np.where(f >= 0, seg, np.nan)
+            seg = np.sqrt(g[..., 0] * du[:, 0] ** 2 + 2 * g[..., 1] * du[:, 0] * du[:, 1]
+                          + g[..., 2] * du[:, 1] ** 2)
+            for piece in np.where(f >= 0, seg, np.nan):       # summed in turn, as the pieces lie
+                L += piece
         T = np.where(np.isfinite(L), L, T)
     if inside is not None:
         T = np.where(_visible(inside, S, P), T, np.inf)
@@ -683,14 +686,26 @@ def _visible(inside, S, P, skip=0.6, chunk=200_000):
     if not len(S) or L.max() <= 2 * skip:
         return out
     t = np.linspace(0.0, 1.0, int(np.ceil(L.max() / 0.25)) + 1)[1:-1]
-    for a in range(0, len(S), max(1, chunk // max(len(t), 1))):
-        b = a + max(1, chunk // max(len(t), 1))
-        s_, p_, l_ = S[a:b], P[a:b], L[a:b]
+    # a segment whose bounding box (one node wider) holds no outside node is seen whatever its samples
+    # round to: count the outside nodes of each box from one summed-area table, and sample only the
+    # others (a seed window away from the boundary: none), at the same fractions ``t``
+    C = np.zeros((ny + 1, nx + 1), np.int64)
+    C[1:, 1:] = np.cumsum(np.cumsum(~inside, axis=0), axis=1)
+    lo, hi = np.minimum(S, P), np.maximum(S, P)
+    j0 = np.clip(np.floor(lo[:, 0]).astype(np.int64) - 1, 0, nx - 1)
+    j1 = np.clip(np.ceil(hi[:, 0]).astype(np.int64) + 1, 0, nx - 1) + 1
+    i0 = np.clip(np.floor(lo[:, 1]).astype(np.int64) - 1, 0, ny - 1)
+    i1 = np.clip(np.ceil(hi[:, 1]).astype(np.int64) + 1, 0, ny - 1) + 1
+    near = np.flatnonzero(C[i1, j1] - C[i0, j1] - C[i1, j0] + C[i0, j0] > 0)
+    step = max(1, chunk // max(len(t), 1))
+    for a in range(0, len(near), step):
+        rows = near[a:a + step]
+        s_, p_, l_ = S[rows], P[rows], L[rows]
         Q = s_[:, None, :] + t[None, :, None] * (p_ - s_)[:, None, :]          # (c, K, 2)
         check = (t[None, :] * l_[:, None] > skip) & ((1 - t[None, :]) * l_[:, None] > skip)
         j = np.clip(np.rint(Q[..., 0]).astype(np.int64), 0, nx - 1)
         i = np.clip(np.rint(Q[..., 1]).astype(np.int64), 0, ny - 1)
-        out[a:b] = ~(check & ~inside[i, j]).any(1)
+        out[rows] = ~(check & ~inside[i, j]).any(1)
     return out
 
 
@@ -799,10 +814,10 @@ def eikonal_march(T_seed, seed, phi, speed, mask, h, solver='auto'):
     return T, 'sweep'
 
 
-def seed_radius(mu, valid, h, source_radius):
-    """Seed disk radius in cells: ``source_radius``, reduced where ``log mu`` varies fast, so that
-    the straight-line chart time inside the disk stays accurate (radius times the largest
-    ``|grad_uv log mu|`` at most 0.15), and at least 3 cells."""
+def log_mu_slope(mu, valid, h):
+    """How fast ``log mu`` varies on a chart's grid: the 99.9th percentile of its central differences
+    over ``valid`` (ny, nx) nodes (``mu`` (ny, nx), spacing ``h``), per UV unit. A property of the
+    chart, made once when it is rasterised (``seed_radius`` of every query uses it)."""
     lm = np.log(np.where(valid, mu, 1.0))
     g = 0.0
     for axis in (0, 1):
@@ -813,7 +828,14 @@ def seed_radius(mu, valid, h, source_radius):
         if both.any():
             d = np.abs(lm[tuple(a)] - lm[tuple(b)])[both] / (2 * h)
             g = max(g, float(np.percentile(d, 99.9)))
-    cap = 0.15 / (g * h) if g > 0 else np.inf
+    return g
+
+
+def seed_radius(slope, h, source_radius):
+    """Seed disk radius in cells: ``source_radius``, reduced where ``log mu`` varies fast, so that
+    the straight-line chart time inside the disk stays accurate (radius times the largest
+    ``|grad_uv log mu|``, ``slope`` of ``log_mu_slope``, at most 0.15), and at least 3 cells."""
+    cap = 0.15 / (slope * h) if slope > 0 else np.inf
     return float(max(SEED_MIN_CELLS, min(source_radius, cap)))
 
 
@@ -1517,6 +1539,7 @@ class Chart:
         else:
             mu = G.interpolate(uv, F, face_values=mu_f)
         self.mu = np.where(valid, np.clip(mu, mu_f.min(), mu_f.max()), 1.0)
+        self.mu_slope = log_mu_slope(self.mu, valid, G.h)
         self.ginv = self.metric_inv if mu_mode == 'metric' else None
         if self.ginv is not None:
             # the re-marches change nothing where every triangle is conformal and mu is the same on all
@@ -1536,8 +1559,10 @@ class Chart:
         self.seed_metric = None
         if self.ginv is not None:
             a, b, c = self.ginv.T
-            # (a triangle the map squashes to a needle has det 0 to round-off: a huge, finite metric)
-            det = np.maximum(a * c - b * b, 1e-12 * a * c + np.finfo(float).tiny)
+            # (a triangle the map squashes to a needle has det 0 to round-off, or below it: a huge, finite
+            # metric, its condition at most about 1e12; ((a + c) / 2)^2 bounds det, and stays positive
+            # where round-off leaves a = 0)
+            det = np.maximum(a * c - b * b, 1e-12 * (0.5 * (a + c)) ** 2 + np.finfo(float).tiny)
             self.seed_metric = (G.face, np.stack([c / det, -b / det, a / det], 1))     # G = (G^-1)^-1
         # triangles the grid does not resolve (surface cell above UNRESOLVED times their mean edge):
         # their vertices take on-mesh fast marching from the resolved ones (``MeshRelax``)
@@ -2113,7 +2138,7 @@ class GeodesicSolver:
         mu_s = bilinear(mu, S, valid)
         if not np.isfinite(mu_s).all():
             raise _Unseeded("a source lies outside the rasterised domain")
-        radius = seed_radius(mu, valid, G.h, source_radius)
+        radius = seed_radius(ch.mu_slope, G.h, source_radius)
         src_local = np.zeros(len(ch.V), bool)
         src_local[loc] = True
         T = np.full(G.shape, np.inf)
