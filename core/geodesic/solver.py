@@ -658,17 +658,24 @@ def _chart_time(inv_mu, valid, S, P, h, inside=None, metric=None):
         K = int(np.clip(np.ceil(2 * np.linalg.norm(D, axis=1).max()), 1, 256))
         L = np.zeros(len(S))
         du = D * (h / K)
+        d00, d0, d1, d11 = du[:, 0] ** 2, du[:, 0], du[:, 1], du[:, 1] ** 2
+        g0, g1, g2 = (np.ascontiguousarray(gmet[:, c]) for c in range(3))
+        flat = face.ravel()
         block = max(1, 1_000_000 // len(S))                  # pieces at once (k, len(S))
         for k0 in range(0, K, block):
             frac = (np.arange(k0, min(K, k0 + block)) + 0.5) / K
-            Q = S[None] + frac[:, None, None] * D[None]
-            i = np.clip(np.rint(Q[..., 1]).astype(np.int64), 0, ny - 1)
-            j = np.clip(np.rint(Q[..., 0]).astype(np.int64), 0, nx - 1)
-            f = face[i, j]
-            g = gmet[np.maximum(f, 0)]
-            seg = np.sqrt(g[..., 0] * du[:, 0] ** 2 + 2 * g[..., 1] * du[:, 0] * du[:, 1]
-                          + g[..., 2] * du[:, 1] ** 2)
-            for piece in np.where(f >= 0, seg, np.nan):       # summed in turn, as the pieces lie
+            i = np.clip(np.rint(S[:, 1] + frac[:, None] * D[:, 1]).astype(np.int64), 0, ny - 1)
+            j = np.clip(np.rint(S[:, 0] + frac[:, None] * D[:, 0]).astype(np.int64), 0, nx - 1)
+            i *= nx
+            i += j
+            f = flat[i]                                      # the triangle of each piece's nearest node
+            fi = np.maximum(f, 0)
+            seg = g0[fi] * d00                               # |du|_G, term by term in the order
+            seg += 2 * g1[fi] * d0 * d1                      # g0 du0^2 + 2 g1 du0 du1 + g2 du1^2
+            seg += g2[fi] * d11
+            np.sqrt(seg, out=seg)
+            seg[f < 0] = np.nan
+            for piece in seg:                                # summed in turn, as the pieces lie
                 L += piece
         T = np.where(np.isfinite(L), L, T)
     if inside is not None:
@@ -689,13 +696,15 @@ def _visible(inside, S, P, skip=0.6, chunk=200_000):
     # a segment whose bounding box (one node wider) holds no outside node is seen whatever its samples
     # round to: count the outside nodes of each box from one summed-area table, and sample only the
     # others (a seed window away from the boundary: none), at the same fractions ``t``
-    C = np.zeros((ny + 1, nx + 1), np.int64)
-    C[1:, 1:] = np.cumsum(np.cumsum(~inside, axis=0), axis=1)
     lo, hi = np.minimum(S, P), np.maximum(S, P)
     j0 = np.clip(np.floor(lo[:, 0]).astype(np.int64) - 1, 0, nx - 1)
     j1 = np.clip(np.ceil(hi[:, 0]).astype(np.int64) + 1, 0, nx - 1) + 1
     i0 = np.clip(np.floor(lo[:, 1]).astype(np.int64) - 1, 0, ny - 1)
     i1 = np.clip(np.ceil(hi[:, 1]).astype(np.int64) + 1, 0, ny - 1) + 1
+    a, b = i0.min(), j0.min()                                  # the table over the boxes' union only
+    C = np.zeros((i1.max() - a + 1, j1.max() - b + 1), np.int64)
+    C[1:, 1:] = np.cumsum(np.cumsum(~inside[a:i1.max(), b:j1.max()], axis=0), axis=1)
+    i0, i1, j0, j1 = i0 - a, i1 - a, j0 - b, j1 - b
     near = np.flatnonzero(C[i1, j1] - C[i0, j1] - C[i1, j0] + C[i0, j0] > 0)
     step = max(1, chunk // max(len(t), 1))
     for a in range(0, len(near), step):
