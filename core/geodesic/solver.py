@@ -187,17 +187,20 @@ def directional_mu(T, valid, face, ginv, step=1):
     direction error grows as its wavelength shrinks (measured: on a fine grid the passes diverge on
     anisotropic triangles); a difference over ``step`` nodes keeps the directions at the resolution of
     a coarser grid (``DIRECTION_NODES``), where the passes settle."""
-    mu1 = _directional_mu(T, valid, face, ginv, 1)
+    f = np.where(face >= 0, face, 0)
+    a, b, cc = ginv[f, 0], ginv[f, 1], ginv[f, 2]          # each node's triangle's G^-1, once
+    mu1 = _directional_mu(T, valid, face, (a, b, cc), 1)
     if step <= 1:
         return mu1
-    mu = _directional_mu(T, valid, face, ginv, int(step), strict=True)
+    mu = _directional_mu(T, valid, face, (a, b, cc), int(step), strict=True)
     return np.where(np.isfinite(mu), mu, mu1)
 
 
-def _directional_mu(T, valid, face, ginv, s, strict=False):
-    """``directional_mu`` with neighbours ``s`` nodes away; ``strict``: only neighbours in the node's own
-    triangle, NaN where an axis has none (the caller falls back to ``s = 1``)."""
-    Tf = np.where(valid & np.isfinite(T), T, np.nan)
+def _directional_mu(T, valid, face, node, s, strict=False):
+    """``directional_mu`` with neighbours ``s`` nodes away, ``node`` the (a, b, c) of ``G^-1`` at each node
+    (ny, nx each); ``strict``: only neighbours in the node's own triangle, NaN where an axis has none
+    (the caller falls back to ``s = 1``)."""
+    Tf = np.where(valid & np.isfinite(T), T, np.nan)          # finite or NaN from here on
     pad = np.pad(Tf, s, constant_values=np.nan)
     fpad = np.pad(face, s, constant_values=-1)
     c = pad[s:-s, s:-s]
@@ -211,19 +214,19 @@ def _directional_mu(T, valid, face, ginv, s, strict=False):
         if strict:
             lo, hi = lo_s, hi_s
         else:
-            none = ~np.isfinite(lo_s) & ~np.isfinite(hi_s)
+            none = np.isnan(lo_s) & np.isnan(hi_s)
             lo, hi = np.where(none, lo, lo_s), np.where(none, hi, hi_s)
-        both = np.isfinite(lo) & np.isfinite(hi)
-        d = np.where(both, 0.5 * (hi - lo), np.nan)
-        d = np.where(~both & np.isfinite(hi), hi - c, d)
-        return np.where(~both & ~np.isfinite(hi) & np.isfinite(lo), c - lo, d)
+        # central where both neighbours are there (NaN otherwise), else one-sided: the forward
+        # difference where only ``hi`` is, the backward one where only ``lo`` is
+        d = 0.5 * (hi - lo)
+        d = np.where(np.isnan(d), hi - c, d)
+        return np.where(np.isnan(d), c - lo, d)
 
     n2 = 2 * s
     gx = diff(pad[s:-s, :-n2], pad[s:-s, n2:], fpad[s:-s, :-n2], fpad[s:-s, n2:])
     gy = diff(pad[:-n2, s:-s], pad[n2:, s:-s], fpad[:-n2, s:-s], fpad[n2:, s:-s])
     nrm = np.hypot(gx, gy)
-    f = np.where(face >= 0, face, 0)
-    a, b, cc = ginv[f, 0], ginv[f, 1], ginv[f, 2]
+    a, b, cc = node
     ok = np.isfinite(nrm) & (nrm > 0)
     with np.errstate(invalid='ignore', divide='ignore'):
         x, y = gx / nrm, gy / nrm
