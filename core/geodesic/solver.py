@@ -704,10 +704,10 @@ def _visible(inside, S, P, skip=0.6, chunk=200_000):
     j1 = np.clip(np.ceil(hi[:, 0]).astype(np.int64) + 1, 0, nx - 1) + 1
     i0 = np.clip(np.floor(lo[:, 1]).astype(np.int64) - 1, 0, ny - 1)
     i1 = np.clip(np.ceil(hi[:, 1]).astype(np.int64) + 1, 0, ny - 1) + 1
-    a, b = i0.min(), j0.min()                                  # the table over the boxes' union only
-    C = np.zeros((i1.max() - a + 1, j1.max() - b + 1), np.int64)
-    C[1:, 1:] = np.cumsum(np.cumsum(~inside[a:i1.max(), b:j1.max()], axis=0), axis=1)
-    i0, i1, j0, j1 = i0 - a, i1 - a, j0 - b, j1 - b
+    r0, c0 = i0.min(), j0.min()                                # the table over the boxes' union only
+    C = np.zeros((i1.max() - r0 + 1, j1.max() - c0 + 1), np.int64)
+    C[1:, 1:] = np.cumsum(np.cumsum(~inside[r0:i1.max(), c0:j1.max()], axis=0), axis=1)
+    i0, i1, j0, j1 = i0 - r0, i1 - r0, j0 - c0, j1 - c0
     near = np.flatnonzero(C[i1, j1] - C[i0, j1] - C[i1, j0] + C[i0, j0] > 0)
     step = max(1, chunk // max(len(t), 1))
     for a in range(0, len(near), step):
