@@ -331,7 +331,7 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     Returns ``FlattenResult``; ``report['warnings']`` (list of str) lists flips, qc_mean above 1.5,
     fallbacks; ``report['planar']`` says when the mesh lies in a plane (``planar_map``: its own
     coordinates are the map, no solve); ``report['layout']`` when the exact discrete conformal layout
-    replaced a linear map that sheared a sliver (``_exact_layouts``; ``exact=False``: never, the linear
+    replaced a linear map that sheared a sliver (``_exact_layout``; ``exact=False``: never, the linear
     map only, as the geodesic solver, sphere mode and the metric reconstruction ask, whose error models
     were measured on it). Raises ``ConformalError`` on bad input."""
     loose = _loose_vertices(V, F)
@@ -373,11 +373,10 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
             and r['mu_ratio'] < EXACT_GAP * r.get('vertex_ratio', 0.0):
         # the optimiser's boundary scale was chosen against the linear map's sheared triangles: in
         # ``uniform`` mode the area map's (u_B = 0) is laid out exactly too, and the better kept
-        scales = {boundary: res.u}
-        if boundary == 'uniform':
-            scales['area'] = np.zeros_like(res.u)
-        for alt in _exact_layouts(V, F, res, scales, fit, real_faces):
-            if _quality_key(alt.report) < _quality_key(res.report):
+        linear = res
+        for u in [linear.u] + ([np.zeros_like(linear.u)] if boundary == 'uniform' else []):
+            alt = _exact_layout(V, F, linear, u, fit, real_faces)
+            if alt is not None and _quality_key(alt.report) < _quality_key(res.report):
                 res = alt
     return res
 
@@ -388,13 +387,13 @@ EXACT_QC = 10.0
 EXACT_GAP = 0.5
 
 
-def _exact_layouts(V, F, res, scales, fit, real_faces):
-    """The exact discrete conformal maps with the boundary scales ``scales`` {name: u (n,)} (the
-    boundary values held, the interior angle sums 2 pi, ``u`` the start of the rest; Newton on one
-    intrinsic Delaunay triangulation, ``core.atlas.cones.flat_cone_metric``, laid out face by face),
-    each measured like the linear map ``res``: a list of ``FlattenResult`` (those whose Newton
-    converged). On a sliver the linear map can shear a triangle far from its shape; the exact metric
-    lays out every intrinsic triangle with its own angles (docs/robustness.md)."""
+def _exact_layout(V, F, res, u, fit, real_faces):
+    """The exact discrete conformal map with the boundary scale ``u`` (n,) (its boundary values held,
+    the interior angle sums 2 pi, ``u`` the start of the rest; Newton on the intrinsic Delaunay
+    triangulation, ``core.atlas.cones.flat_cone_metric``, laid out face by face), measured like
+    the linear map ``res``: a ``FlattenResult``, or None when Newton does not converge. On a sliver
+    the linear map can shear a triangle far from its shape; the exact metric lays out every intrinsic
+    triangle with its own angles (docs/robustness.md)."""
     from ..atlas.cones import flat_cone_metric, unfold
     from ..mesh.topology import boundary_loops
     t0 = time.perf_counter()
@@ -402,32 +401,31 @@ def _exact_layouts(V, F, res, scales, fit, real_faces):
     Vn, unit = normalise_scale(np.asarray(V, np.float64))
     n = len(Vn)
     loops = boundary_loops(F, n)
-    if len(loops) != 1:
-        return []
-    degenerate = degenerate_faces(Vn, F)
-    T = intrinsic_delaunay(Vn, F, mollify_delta=1e-4 if degenerate.any() else 0.0)
+    if len(loops) != 1 or not np.isfinite(u).all():
+        return None
+    T = intrinsic_delaunay(Vn, F, mollify_delta=1e-4 if degenerate_faces(Vn, F).any() else 0.0)
     fixed = np.zeros(n, bool)
     fixed[loops[0]] = True
+    got = flat_cone_metric(T, np.arange(n), n, np.full(n, 2 * np.pi), fixed, u - u[fixed].mean())
+    if got is None:
+        return None
+    uv = unfold(T, got[1])
+    if not np.isfinite(uv).all():
+        return None
+    r = {k: v for k, v in res.report.items() if k not in ('flips_folded', 'squashed', 'warnings', 'seconds')}
+    r['layout'] = {'exact': True, 'flat_triangles': int(got[2]),
+                   'boundary_scale': 'area' if not u.any() else res.report['boundary'],
+                   'linear': {k: res.report[k] for k in ('flips', 'qc_max', 'mu_ratio')}}
+    kept = [w for w in res.report.get('warnings', []) if w not in _warnings(res.report)]
     mask = None if real_faces is None else np.asarray(real_faces, bool)
+    degenerate = degenerate_faces(Vn, F)
     if degenerate.any():
         mask = ~degenerate if mask is None else mask & ~degenerate
     frames, A = local_frames(Vn, F)
-    base = {k: v for k, v in res.report.items()
-            if k not in ('flips_folded', 'squashed', 'warnings', 'seconds')}
-    kept = [w for w in res.report.get('warnings', []) if w not in _warnings(res.report)]
-    out = []
-    for name, u in scales.items():
-        got = flat_cone_metric(T, np.arange(n), n, np.full(n, 2 * np.pi), fixed, u - u[fixed].mean()) \
-            if np.isfinite(u).all() else None
-        uv = None if got is None else unfold(T, got[1])
-        if uv is None or not np.isfinite(uv).all():
-            continue
-        r = dict(base, layout={'exact': True, 'flat_triangles': int(got[2]), 'boundary_scale': name,
-                               'linear': {k: res.report[k] for k in ('flips', 'qc_max', 'mu_ratio')}})
-        timings = dict(res.report.get('seconds', {}), exact_layout=time.perf_counter() - t0)
-        out.append(_measured(r, uv, got[0], F, mask, A, lambda uv: jacobians_from_frames(frames, F, uv), fit,
-                             unit, list(kept), timings, t0 - timings.get('total', 0.0), V=Vn))
-    return out
+    timings = dict(res.report.get('seconds', {}))
+    timings['exact_layout'] = time.perf_counter() - t0
+    return _measured(r, uv, got[0], F, mask, A, lambda uv: jacobians_from_frames(frames, F, uv), fit, unit,
+                     kept, timings, t0 - timings.get('total', 0.0), V=Vn)
 
 
 def _loose_vertices(V, F):
