@@ -387,7 +387,7 @@ def _cone_metric_problem(size, cones):
 def test_exact_flat_cone_metric_and_its_unfolding():
     """Newton on the discrete conformal equation reaches the target angle sums (the cone angles,
     2*pi elsewhere), and the unfolded cut disk has exactly the metric's edge lengths."""
-    from core.atlas.cones import flat_cone_metric, unfold
+    from core.mesh.flat_metric import flat_cone_metric, unfold
     from core.mesh.intrinsic import corner_angles
     V, F, sy, S, kap, seams, cut, T, target, fixed = _cone_metric_problem(8, [5, 90, 160, 300, 420])
     n = len(V)
@@ -549,7 +549,7 @@ def test_krylov_newton_reaches_the_same_flat_metric():
     factor, ``krylov=True``) converges to the chord method's flat cone metric (the same unique
     solution up to round-off), from the linear log scale and from zero (no preconditioner: it factors
     the Hessian itself)."""
-    from core.atlas.cones import flat_cone_metric
+    from core.mesh.flat_metric import flat_cone_metric
     from core.mesh.intrinsic import corner_angles
     V, F, sy, S, kap, seams, cut, T, target, fixed = _cone_metric_problem(10, [5, 90, 160, 300, 420, 610])
     n = len(V)
@@ -711,7 +711,7 @@ def test_unfold_reproduces_a_long_flat_strip():
     vertices, overlapping itself in the plane) comes back as itself up to a rigid motion, to round-off.
     Reading each face's rotation off the placed edge amplified the errors step by step (lengths off by
     up to 2.2 there)."""
-    from core.atlas.cones import unfold
+    from core.mesh.flat_metric import unfold
     from core.mesh.intrinsic import intrinsic_delaunay
     V, F = _strip(10, 150, 1.5, 0.0)
     T = intrinsic_delaunay(V, F, mollify_delta=0.0, max_rounds=0)
