@@ -562,7 +562,7 @@ def reconstruct(V, F, sources, sensors, times, boundary='uniform', cells=DEFAULT
         raise ConformalError(f"the noise level must be a positive number, got {noise}")
     report_progress(0.0, 'flattening')
     if flat is None:
-        flat = flatten(V, F, boundary=boundary, fit='true_scale', bound=False)
+        flat = flatten(V, F, boundary=boundary, fit='true_scale', bound=False, exact=False)
         flat_mode = boundary
     else:
         flat_mode = flat.report.get('boundary', 'given')
@@ -601,7 +601,7 @@ def simulate_times(V, F, xi, sources, sensors, boundary='uniform', cells=4 * DEF
         raise ConformalError(f"the metric must be {len(V)} finite positive values, one per vertex")
     src, sns, _ = check_measurements(len(V), sources, sensors, np.zeros(len(np.ravel(sources))))
     if flat is None:
-        flat = flatten(V, F, boundary=boundary, fit='true_scale', bound=False)
+        flat = flatten(V, F, boundary=boundary, fit='true_scale', bound=False, exact=False)
     uv = flat.uv
     grid = make_grid(uv, F, vertex_mu(V, F, uv), cells)
     w = np.exp(grid.field(uv, F, np.log(xi))) / grid.mu

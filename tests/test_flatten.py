@@ -399,3 +399,27 @@ def test_a_scan_with_crumpled_spots_gets_a_clean_uniform_map(seed):
     if seed == 3:                            # the area map's only flips are the mesh's: optimised
         assert 'fallback' not in uni and uni['folded_left_out'] == folded
         assert uni['flips'] == uni['flips_folded'] and uni['mu_ratio'] > area['mu_ratio']
+
+
+def test_a_sheared_sliver_gets_the_exact_layout():
+    """On a scan-like patch (``scan_patch(2500, 12)``) the linear map shears one sliver by 57x, which
+    alone sets its triangles' ratio at 0.13 where the vertices' is 0.44. The exact discrete conformal
+    layout with the same boundary scale keeps every triangle's shape: ratio above 0.4, no flip. It
+    is measured as the linear map is (the report agrees with the UVs), it is kept only when it scores
+    better, and rigid motion, scale and vertex order do not change it."""
+    from meshgen import scan_patch
+    V, F = scan_patch(2500, 12)
+    for boundary in ('area', 'uniform'):
+        res = flatten(V, F, boundary=boundary)
+        r = res.report
+        assert r['layout']['exact'] and r['layout']['linear']['mu_ratio'] < 0.2
+        assert r['layout']['linear']['qc_max'] > 50
+        assert r['flips'] == 0 and r['qc_max'] < 5 and r['qc_mean'] < 1.05 and r['mu_ratio'] > 0.4
+        m = uv_measures(V, F, res.uv)
+        assert abs(m['mu_ratio'] - r['mu_ratio']) < 1e-9 and m['flips'] == 0
+    rng = np.random.default_rng(0)
+    R = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+    perm = rng.permutation(len(V))
+    inv = np.argsort(perm)
+    moved = flatten(3.7 * V[perm] @ R.T + 5.0, inv[F]).report
+    assert moved['layout']['exact'] and abs(moved['mu_ratio'] - r['mu_ratio']) < 1e-6 * r['mu_ratio']

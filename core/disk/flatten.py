@@ -28,6 +28,7 @@ from ..mesh.geometry import angle_sums, face_areas, folded_faces
 from ..mesh.laplacian import cotan_laplacian
 from ..mesh.measures import (SQUASHED_QC, folded_flips, flip_warning, jacobians_from_frames, local_frames,
                              measures_from_jacobians, signed_uv_areas, squashed_count)
+from ..mesh.flat_metric import flat_cone_metric, unfold
 from ..mesh.intrinsic import intrinsic_delaunay
 from ..mesh.solve import Factor, FactorJob, factor_all, fill_order, sub_order
 from .lscm import lscm
@@ -310,7 +311,8 @@ def _warnings(report, qc_limit=QC_WARN):
 
 @one_thread()
 def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FACES, bound=None,
-            progress=None, real_faces=None, operators='auto', checked_loop=None, **options) -> FlattenResult:
+            progress=None, real_faces=None, operators='auto', checked_loop=None, exact=True,
+            **options) -> FlattenResult:
     """Flatten a disk-topology triangle mesh conformally.
 
     V: (n,3) float positions. F: (m,3) int triangles, counter-clockwise. boundary: 'free', 'area' or
@@ -329,14 +331,17 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
     are then not repeated. Extra ``options`` go to ``core.disk.uniform.optimise``.
     Returns ``FlattenResult``; ``report['warnings']`` (list of str) lists flips, qc_mean above 1.5,
     fallbacks; ``report['planar']`` says when the mesh lies in a plane (``planar_map``: its own
-    coordinates are the map, no solve). Raises ``ConformalError`` on bad input."""
+    coordinates are the map, no solve); ``report['layout']`` when the exact discrete conformal layout
+    replaced a linear map that sheared a sliver (``_exact_layouts``; ``exact=False``: never, the linear
+    map only, as the geodesic solver, sphere mode and the metric reconstruction ask, whose error models
+    were measured on it). Raises ``ConformalError`` on bad input."""
     loose = _loose_vertices(V, F)
     if loose is not None:
         # vertices in no face take no part: the map of the rest, NaN UVs for them, the repair listed
         used, remap = loose
         res = flatten(np.asarray(V)[used], remap[np.asarray(F, np.int64)], boundary, fit, max_faces, bound,
                       progress, real_faces, operators, None if checked_loop is None else
-                      remap[np.asarray(checked_loop, np.int64)], **options)
+                      remap[np.asarray(checked_loop, np.int64)], exact, **options)
         n = len(V)
         uv = np.full((n, 2), np.nan)
         uv[used] = res.uv
@@ -362,8 +367,67 @@ def flatten(V, F, boundary='uniform', fit='true_scale', max_faces=DEFAULT_MAX_FA
                        **options)
         if _quality_key(alt.report) < _quality_key(r):
             alt.report['operators']['tried_first'] = {k: r[k] for k in ('flips', 'qc_mean', 'mu_ratio')}
-            return alt
+            res = alt
+    r = res.report
+    if exact and boundary != 'free' and res.u is not None and not r.get('planar') and \
+            not r['qc_max'] <= EXACT_QC \
+            and r['mu_ratio'] < EXACT_GAP * r.get('vertex_ratio', 0.0):
+        # the optimiser's boundary scale was chosen against the linear map's sheared triangles: in
+        # ``uniform`` mode the area map's (u_B = 0) is laid out exactly too, and the better kept
+        scales = {boundary: res.u}
+        if boundary == 'uniform':
+            scales['area'] = np.zeros_like(res.u)
+        for alt in _exact_layouts(V, F, res, scales, fit, real_faces):
+            if _quality_key(alt.report) < _quality_key(res.report):
+                res = alt
     return res
+
+
+# a linear map that shears a triangle beyond EXACT_QC, where the triangles' ratio falls below EXACT_GAP
+# times the vertices' (the sheared triangles, not the scale, set it), also gets the exact layout
+EXACT_QC = 10.0
+EXACT_GAP = 0.5
+
+
+def _exact_layouts(V, F, res, scales, fit, real_faces):
+    """The exact discrete conformal maps with the boundary scales ``scales`` {name: u (n,)} (the
+    boundary values held, the interior angle sums 2 pi, ``u`` the start of the rest; Newton on one
+    intrinsic Delaunay triangulation, ``core.mesh.flat_metric.flat_cone_metric``, laid out face by face),
+    each measured like the linear map ``res``: a list of ``FlattenResult`` (those whose Newton
+    converged). On a sliver the linear map can shear a triangle far from its shape; the exact metric
+    lays out every intrinsic triangle with its own angles (docs/robustness.md)."""
+    from ..mesh.topology import boundary_loops
+    t0 = time.perf_counter()
+    F = np.asarray(F, np.int64)
+    Vn, unit = normalise_scale(np.asarray(V, np.float64))
+    n = len(Vn)
+    loops = boundary_loops(F, n)
+    if len(loops) != 1:
+        return []
+    degenerate = degenerate_faces(Vn, F)
+    T = intrinsic_delaunay(Vn, F, mollify_delta=1e-4 if degenerate.any() else 0.0)
+    fixed = np.zeros(n, bool)
+    fixed[loops[0]] = True
+    mask = None if real_faces is None else np.asarray(real_faces, bool)
+    if degenerate.any():
+        mask = ~degenerate if mask is None else mask & ~degenerate
+    frames, A = local_frames(Vn, F)
+    base = {k: v for k, v in res.report.items()
+            if k not in ('flips_folded', 'squashed', 'warnings', 'seconds')}
+    kept = [w for w in res.report.get('warnings', []) if w not in _warnings(res.report)]
+    out = []
+    for name, u in scales.items():
+        got = flat_cone_metric(T, np.arange(n), n, np.full(n, 2 * np.pi), fixed, u - u[fixed].mean()) \
+            if np.isfinite(u).all() else None
+        uv = None if got is None else unfold(T, got[1])
+        if uv is None or not np.isfinite(uv).all():
+            continue
+        r = dict(base, layout={'exact': True, 'flat_triangles': int(got[2]), 'boundary_scale': name,
+                               'linear': {k: res.report[k] for k in ('flips', 'qc_max', 'mu_ratio')}})
+        timings = dict(res.report.get('seconds', {}), exact_layout=time.perf_counter() - t0)
+        out.append(_measured(r, uv, got[0], F, mask, A, lambda uv: jacobians_from_frames(frames, F, uv), fit,
+                             unit, list(kept), timings, t0 - timings.get('total', 0.0), V=Vn))
+    return out
 
 
 def _loose_vertices(V, F):

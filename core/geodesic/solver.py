@@ -1761,7 +1761,7 @@ class GeodesicSolver:
             elif single and not pinched and len(boundary_loops(F, self.n)) == 1:
                 from ..atlas.islands import boundary_crossings
                 from ..disk.flatten import flatten
-                res = flatten(V, F, boundary=boundary, fit='true_scale', bound=False)
+                res = flatten(V, F, boundary=boundary, fit='true_scale', bound=False, exact=False)
                 vert_of, Fs, uvs = np.arange(self.n), F, res.uv
                 report['mu_ratio'] = res.report.get('mu_ratio')
                 folded = boundary_crossings(res.uv, boundary_loops(F, self.n)) > 0
@@ -1780,7 +1780,7 @@ class GeodesicSolver:
                 from ..atlas.islands import unwrap
                 # holes filled virtually (a hole cut open would be a wall the distances cannot cross)
                 res = unwrap(V, Fo, seams=seams, boundary=boundary, fit='true_scale', pack=False,
-                             allow_loose=True, holes='fill')
+                             allow_loose=True, holes='fill', exact=False)
                 vert_of, Fs, uvs, face_island = res.vert_of, res.F, res.uv, res.face_island
                 if method != 'grid':
                     # pieces the flattening cut all the same (a filled map that overlapped and was split

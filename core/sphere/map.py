@@ -215,7 +215,7 @@ def conformal_sphere(V: np.ndarray, F: np.ndarray, progress=None) -> tuple:
     # local conformal coordinate around the pole and the singular part s = 1 / (f - f(pole))
     report(0.05, 'local chart at the pole')
     if Fp is not None:
-        f = flatten(V[idx], Fp, boundary='area').uv
+        f = flatten(V[idx], Fp, boundary='area', exact=False).uv
         f = f[:, 0] + 1j * f[:, 1]
     else:                                    # tiny mesh: the tangent plane of the pole triangle
         P = V[F[t]]
