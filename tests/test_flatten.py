@@ -423,3 +423,6 @@ def test_a_sheared_sliver_gets_the_exact_layout():
     inv = np.argsort(perm)
     moved = flatten(3.7 * V[perm] @ R.T + 5.0, inv[F]).report
     assert moved['layout']['exact'] and abs(moved['mu_ratio'] - r['mu_ratio']) < 1e-6 * r['mu_ratio']
+    from core import unwrap
+    island = unwrap(V, F).islands[0]             # an island's report says which layout it has
+    assert island['layout']['exact'] and island['mu_ratio'] > 0.4 and island['flips'] == 0

@@ -247,7 +247,7 @@ def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
         rep['degenerate_faces'] = int((~ok).sum())
         rep['flips'] += int((signed_uv_areas(uv, F[~ok]) < 0).sum())
     rep['overlaps'] = boundary_crossings(uv, loops)
-    rep.update({k: res.report[k] for k in ('bound_vertex', 'vertex_ratio', 'operators', 'fallback')
+    rep.update({k: res.report[k] for k in ('bound_vertex', 'vertex_ratio', 'operators', 'fallback', 'layout')
                 if k in res.report})
     rep['warnings'] = [w for w in res.report.get('warnings', [])
                        if 'flipped' not in w and 'qc_mean' not in w and 'scale variation' not in w]

@@ -176,7 +176,8 @@ def _disk(V, F, loops, boundary, fit, max_faces, progress, options):
     rep = {'island': 1, 'triangles': int(len(F)), 'vertices': int(len(V)), 'loops': 1,
            **{k: r[k] for k in MEASURE_KEYS if k in r},
            'overlaps': boundary_crossings(res.uv, loops), 'area_3d': float(face_areas(V, F).sum())}
-    for k in ('bound_vertex', 'vertex_ratio', 'bound_note', 'converged', 'iterations', 'flips_folded'):
+    for k in ('bound_vertex', 'vertex_ratio', 'bound_note', 'converged', 'iterations', 'flips_folded',
+              'layout'):
         if k in r:
             rep[k] = r[k]
     rep['seconds'] = r.get('seconds', {}).get('total')
