@@ -1259,6 +1259,7 @@ def _relax_folds(Fc, loop, uv, Lc, rounds=REPAIR_ROUNDS, Vc=None):
 
 
 RING_ENUMERATE = 40   # ``ring_clearance`` enumerates the vertices of rings up to this many triangles
+_BOX = np.array([[-1.0, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0]])   # p within [-1, 1]^2, as rows of A x >= -1
 
 
 @lru_cache(maxsize=None)
@@ -1283,14 +1284,16 @@ def ring_clearance(g, h):
                       bounds=[(-1, 1), (-1, 1), (None, None)], method='highs')
         return float(res.x[2]) if res.status == 0 else -np.inf
     # constraints as rows of A x >= b, x = (p0, p1, t)
-    A = np.r_[np.c_[g, -np.ones(r)], [[-1, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0]]]
-    b = np.r_[-h, -1.0, -1.0, -1.0, -1.0]
-    i, j, k = _choose(len(A), 3)
-    M = np.stack([A[i], A[j], A[k]], 1)
+    A = np.empty((r + 4, 3))
+    A[:r, :2], A[:r, 2], A[r:] = g, -1.0, _BOX
+    b = np.empty(r + 4)
+    b[:r], b[r:] = -h, -1.0
+    idx = _choose(r + 4, 3).T                    # (C, 3): every three constraints
+    M = A[idx]
     ok = np.abs(np.linalg.det(M)) > 1e-12
     if not ok.any():
         return -np.inf
-    x = np.linalg.solve(M[ok], np.stack([b[i], b[j], b[k]], 1)[ok][..., None])[..., 0]
+    x = np.linalg.solve(M[ok], b[idx][ok][..., None])[..., 0]
     feas = (x @ A.T >= b - 1e-9).all(1)
     return float(x[feas, 2].max()) if feas.any() else -np.inf
 
@@ -1302,11 +1305,11 @@ def l1_nearest(g, c):
     all tried (``untangle``'s second linear program, solved exactly)."""
     cand = [np.zeros((1, 2))]
     if len(g) >= 2:
-        i, j = _choose(len(g), 2)
-        M = np.stack([g[i], g[j]], 1)
+        idx = _choose(len(g), 2).T               # (C, 2): every two constraints
+        M = g[idx]
         ok = np.abs(np.linalg.det(M)) > 1e-12
         if ok.any():
-            cand.append(np.linalg.solve(M[ok], np.stack([c[i], c[j]], 1)[ok][..., None])[..., 0])
+            cand.append(np.linalg.solve(M[ok], c[idx][ok][..., None])[..., 0])
     for ax in (0, 1):                                   # on the axis p[1 - ax] = 0
         a = g[:, ax]
         nz = np.abs(a) > 1e-12
@@ -1351,7 +1354,7 @@ def untangle(Fc, uv, pinned, rounds=UNTANGLE_ROUNDS, margin=UNTANGLE_MARGIN):
             p0 = uv[v]
             a = uv[Fc[rows, (k + 1) % 3]] - p0                # (r,2) the corners after v (ccw)
             b = uv[Fc[rows, (k + 2) % 3]] - p0
-            size = float(np.abs(np.r_[a, b]).max())
+            size = float(max(np.abs(a).max(), np.abs(b).max()))
             if not size > 0:
                 continue
             a, b = a / size, b / size
