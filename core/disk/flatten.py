@@ -413,7 +413,7 @@ def _exact_layouts(V, F, res, scales, fit, real_faces):
         mask = ~degenerate if mask is None else mask & ~degenerate
     frames, A = local_frames(Vn, F)
     base = {k: v for k, v in res.report.items()
-            if k not in ('flips_folded', 'squashed', 'warnings', 'seconds')}
+            if k not in ('flips_folded', 'squashed', 'degenerate_flips', 'warnings', 'seconds')}
     kept = [w for w in res.report.get('warnings', []) if w not in _warnings(res.report)]
     out = []
     for name, u in scales.items():
@@ -424,6 +424,8 @@ def _exact_layouts(V, F, res, scales, fit, real_faces):
             continue
         r = dict(base, layout={'exact': True, 'flat_triangles': int(got[2]), 'boundary_scale': name,
                                'linear': {k: res.report[k] for k in ('flips', 'qc_max', 'mu_ratio')}})
+        if degenerate.any():           # as ``_flatten`` counts them: this map's own, not the linear one's
+            r['degenerate_flips'] = int((signed_uv_areas(uv, F[degenerate]) < 0).sum())
         timings = dict(res.report.get('seconds', {}), exact_layout=time.perf_counter() - t0)
         out.append(_measured(r, uv, got[0], F, mask, A, lambda uv: jacobians_from_frames(frames, F, uv), fit,
                              unit, list(kept), timings, t0 - timings.get('total', 0.0), V=Vn))
