@@ -31,6 +31,7 @@ from ..mesh.measures import (SQUASHED_QC, folded_flips, flip_warning, jacobians_
 from ..mesh.flat_metric import flat_cone_metric, unfold
 from ..mesh.intrinsic import intrinsic_delaunay
 from ..mesh.solve import Factor, FactorJob, factor_all, fill_order, sub_order
+from ..mesh.topology import boundary_loops
 from .lscm import lscm
 from .uniform import optimise, vertex_bound
 from ..mesh.validate import check_mesh, degenerate_faces, normalise_scale, DEFAULT_MAX_FACES
@@ -396,7 +397,6 @@ def _exact_layouts(V, F, res, scales, fit, real_faces):
     each measured like the linear map ``res``: a list of ``FlattenResult`` (those whose Newton
     converged). On a sliver the linear map can shear a triangle far from its shape; the exact metric
     lays out every intrinsic triangle with its own angles (docs/robustness.md)."""
-    from ..mesh.topology import boundary_loops
     t0 = time.perf_counter()
     F = np.asarray(F, np.int64)
     Vn, unit = normalise_scale(np.asarray(V, np.float64))
@@ -424,11 +424,10 @@ def _exact_layouts(V, F, res, scales, fit, real_faces):
             continue
         r = dict(base, layout={'exact': True, 'flat_triangles': int(got[2]), 'boundary_scale': name,
                                'linear': {k: res.report[k] for k in ('flips', 'qc_max', 'mu_ratio')}})
-        if degenerate.any():           # as ``_flatten`` counts them: this map's own, not the linear one's
-            r['degenerate_flips'] = int((signed_uv_areas(uv, F[degenerate]) < 0).sum())
         timings = dict(res.report.get('seconds', {}), exact_layout=time.perf_counter() - t0)
         out.append(_measured(r, uv, got[0], F, mask, A, lambda uv: jacobians_from_frames(frames, F, uv), fit,
-                             unit, list(kept), timings, t0 - timings.get('total', 0.0), V=Vn))
+                             unit, list(kept), timings, t0 - timings.get('total', 0.0), V=Vn,
+                             degenerate=degenerate))
     return out
 
 
@@ -567,20 +566,22 @@ def _flatten(V, F, boundary, fit, max_faces, bound, progress, real_faces, operat
     elif job is not None:
         job.result()                           # not wanted after all (the optimiser fell back)
     report_progress(0.95, 'measuring')
-    if degenerate.any():
-        # a zero-area triangle has no Jacobian; it still must not turn over in UV (the sign does not
-        # change with the similarity ``normalise_uv`` applies)
-        report['degenerate_flips'] = int((signed_uv_areas(uv, F[degenerate]) < 0).sum())
     return _measured(report, uv, u, F, mask, system.A, system.jacobians, fit, unit, warnings, timings, t0,
-                     V=V)
+                     V=V, degenerate=degenerate)
 
 
-def _measured(report, uv, u, F, mask, A, jacobians, fit, unit, warnings, timings, t0, V=None):
+def _measured(report, uv, u, F, mask, A, jacobians, fit, unit, warnings, timings, t0, V=None,
+              degenerate=None):
     """The ``FlattenResult`` of a map ``uv`` (n,2) with log scale ``u`` (n,) or None: normalised
     (``fit``, ``unit`` the mesh's scale), measured per triangle on ``mask`` (None: all) with the 3D
     areas ``A`` (m,) and ``jacobians(uv)`` (m,2,2), and its report completed (measures, warnings,
     seconds since ``t0``). With the positions ``V`` (n,3), flipped triangles that are folded over in
-    the mesh itself (``folded_faces``) are counted too (``flips_folded``)."""
+    the mesh itself (``folded_faces``) are counted too (``flips_folded``); with ``degenerate`` (m,)
+    bool, the zero-area triangles turned over (``degenerate_flips``)."""
+    if degenerate is not None and degenerate.any():
+        # a zero-area triangle has no Jacobian; it still must not turn over in UV (the sign does not
+        # change with the similarity ``normalise_uv`` applies)
+        report['degenerate_flips'] = int((signed_uv_areas(uv, F[degenerate]) < 0).sum())
     Fm = F if mask is None else F[mask]
     uv = normalise_uv(Fm, uv, (A if mask is None else A[mask]).sum(), fit)
     J = jacobians(uv)
