@@ -144,18 +144,6 @@ def load(name):
     return mesh.V, F, seams
 
 
-def exact(Vs, Fs, sources):
-    """(k, N) exact polyhedral distances (MMP) on the split mesh from split vertices ``sources``."""
-    from pygeodesic import geodesic
-    alg = geodesic.PyGeodesicAlgorithmExact(np.ascontiguousarray(Vs, np.float64),
-                                            np.ascontiguousarray(Fs, np.int32))
-    out = []
-    for s in sources:
-        d, _ = alg.geodesicDistances(np.array([s], np.int32), None)
-        out.append(np.asarray(d, np.float64))
-    return np.array(out)
-
-
 def heat_setup(Vs, Fs):
     """A heat-method solver on the split mesh: potpourri3d if it imports, else our own."""
     try:
