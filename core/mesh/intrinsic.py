@@ -325,8 +325,9 @@ class IntrinsicTriangulation:
         return np.stack([-X[:, 1], X[:, 0]], axis=1)
 
     def non_delaunay(self, tol=1e-12):
-        """(E,) bool: interior edges with ``cot alpha + cot beta < -tol`` (opposite angles sum > pi)."""
-        return _non_delaunay(self.cotangents(), self.EF, self.EC, tol)
+        """(E,) bool: interior edges with ``cot alpha + cot beta`` below ``-tol`` by more than its
+        rounding error (opposite angles sum > pi; ``cot_rounding``)."""
+        return _non_delaunay(self.cotangents(), self.EF, self.EC, tol, cot_rounding(self.l, self.areas()))
 
 
 def _edge_weights(c, EF, EC):
@@ -338,11 +339,28 @@ def _edge_weights(c, EF, EC):
     return w
 
 
-def _non_delaunay(c, EF, EC, tol):
-    """(E,) bool: interior edges whose cotangents ``c`` (m,3) sum below ``-tol``."""
+# a cotangent computed from lengths carries a rounding error of about machine epsilon times the sum of
+# the squared lengths over four times the area (the numerator cancels on a sliver); this many of those
+ROUNDING_ULPS = 64.0
+
+
+def cot_rounding(l, A):
+    """(m,) the rounding error bound of each face's cotangents from its lengths ``l`` (m,3) and areas
+    ``A`` (m,): ``ROUNDING_ULPS eps sum(l^2) / (4 A)`` (about 1e-13 on a well-shaped triangle, up to
+    1e-9 on a sliver whose lengths nearly meet the triangle inequality). 0 on a zero-area face: its
+    cotangents are infinite, and their sign decides."""
+    with np.errstate(divide='ignore', invalid='ignore'):
+        rho = ROUNDING_ULPS * np.finfo(np.float64).eps * (l * l).sum(axis=1) / (4.0 * A)
+    return np.where(A > 0, rho, 0.0)
+
+
+def _non_delaunay(c, EF, EC, tol, rho):
+    """(E,) bool: interior edges whose cotangents ``c`` (m,3) sum below ``-tol`` by more than the two
+    faces' rounding errors ``rho`` (m,) (``cot_rounding``)."""
     inner = EF[:, 1] >= 0
     s = np.zeros(len(EF))
-    s[inner] = (c[EF[inner, 0], EC[inner, 0]] + c[EF[inner, 1], EC[inner, 1]])
+    f0, f1 = EF[inner, 0], EF[inner, 1]
+    s[inner] = (c[f0, EC[inner, 0]] + c[f1, EC[inner, 1]]) + (rho[f0] + rho[f1])
     return inner & (s < -tol)
 
 
@@ -354,8 +372,11 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
     two faces of an edge; the last face wins). Lengths are first mollified with ``mollify_delta``
     (0 disables), then non-Delaunay interior edges (``cot alpha + cot beta < -tol``) are flipped in
     parallel rounds until none is left or ``max_rounds`` is reached (``max_rounds=0``: no flips, the
-    mollified input mesh). An edge is not flipped when its two opposite vertices are the same vertex or
-    when both sides are the same face.
+    mollified input mesh). The test allows for the sum's rounding error (``cot_rounding``): on a sliver
+    whose cotangents are only known to 1e-12, an edge that is Delaunay within that error is kept, where
+    flipping it would give a diagonal that tests the same way and flips back, round after round. An
+    edge is not flipped when its two opposite vertices are the same vertex or when both sides are the
+    same face.
 
     Returns an ``IntrinsicTriangulation``; its ``report`` has ``flips``, ``rounds``, ``eps`` (the
     mollification, units of V), ``negative_before`` / ``negative_after`` (edges with cotan weight
@@ -386,6 +407,7 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
     l0 = el[FE]
     A0 = face_areas(l0)
     c0 = corner_cotangents(l0, A0)
+    rho = cot_rounding(l0, A0)                                # (m,), kept up to date as faces change
     neg_before = int(np.sum(_edge_weights(c0, EF, EC) < -tol))
 
     interior = EF[:, 1] >= 0
@@ -405,7 +427,7 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
         else:
             w = _cot_pair(l_e, l_ca, l_ab, l_bd, l_dc)
         a, d = F[t, k], F[s, j]
-        bad = (w < -tol) & (t != s) & (a != d)
+        bad = (w + (rho[t] + rho[s]) < -tol) & (t != s) & (a != d)
         e, t, k, s, j = e[bad], t[bad], k[bad], s[bad], j[bad]
         if len(e) == 0:
             break
@@ -451,6 +473,9 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
         EF[e, 0], EC[e, 0] = t, k1
         EF[e, 1], EC[e, 1] = s, j1
         el[e] = l_new
+        for g in (t, s):
+            lg = el[FE[g]]
+            rho[g] = cot_rounding(lg, face_areas(lg))
 
         flips += len(e)
         rounds += 1
@@ -470,7 +495,7 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
         negative_before=neg_before,
         negative_after=int(np.sum(w_after < -tol)),
         negative_boundary_after=int(np.sum((w_after < -tol) & ~interior)),
-        non_delaunay_after=int(np.sum(_non_delaunay(c0, EF, EC, tol))),
+        non_delaunay_after=int(np.sum(_non_delaunay(c0, EF, EC, tol, cot_rounding(l0, A0)))),
     )
     T.report['converged'] = T.report['non_delaunay_after'] == 0
     return T
