@@ -526,7 +526,10 @@ def test_cheburashka_angle_error_and_folds():
     assert cm.angle_error(V, F, res.S) <= 2.94
     r = res.report
     assert r['untangle']['folds_before'] >= 3 and r['untangle']['folds_after'] == 0
-    assert r['flips'] == 0 and r['warnings'] == []
+    # no fold and no other warning; without the Moebius choice the scale varies 10^5-fold, and the
+    # report says which choice would help
+    assert r['flips'] == 0 and r['mu_ratio'] < 1e-4 and len(r['warnings']) == 1
+    assert "moebius='uniform'" in r['warnings'][0]
 
 
 def test_untangled_map_does_not_depend_on_numbering_or_placement():
@@ -710,6 +713,23 @@ def test_warnings_name_each_problem():
     assert sphere_warnings(ok) == []
     w = sphere_warnings(dict(ok, flips=3, qc_mean=1.7, moebius_converged=False))
     assert len(w) == 3 and '3 of 100' in w[0] and '1.7' in w[1] and 'Moebius' in w[2]
+    assert sphere_warnings(dict(ok, mu_ratio=2e-4)) == []
+    w = sphere_warnings(dict(ok, mu_ratio=3e-6))
+    assert len(w) == 1 and 'mu_ratio 3e-06' in w[0] and "cones='auto'" in w[0]
+    w = sphere_warnings(dict(ok, mu_ratio=3e-6, moebius='none'))
+    assert len(w) == 1 and "moebius='uniform'" in w[0]
+
+
+def test_a_long_protrusion_is_warned_as_extreme_scale_variation():
+    """A closed mesh with a long thin part (a capsule 30 radii long: a limb) maps without folds, but
+    even the most uniform Moebius choice shrinks one end 10^6-fold: the report says so and names the
+    remedy (cones) instead of returning plain success. A capsule 10 radii long is not warned."""
+    from meshgen import capped_cylinder
+    long = sphere_map(*capped_cylinder(12, 120, 1.0, 30.0)).report
+    assert long['flips'] == 0 and long['mu_ratio'] < 1e-5
+    assert [w for w in long['warnings'] if 'extreme scale variation' in w and "cones='auto'" in w]
+    short = sphere_map(*capped_cylinder(24, 60, 1.0, 10.0)).report
+    assert short['flips'] == 0 and short['mu_ratio'] > 1e-3 and short['warnings'] == []
 
 
 def test_reversed_faces_are_turned_not_refused():

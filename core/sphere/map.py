@@ -43,8 +43,8 @@ fails with a fixed zero-area tolerance on fine meshes. Here the Laplacian only e
 functions: the same icosphere maps to itself with qc_mean 1.0007 and min/max mu 0.996, nothing is
 computed from chart areas, and no tolerance depends on absolute size. Needle triangles can still fold
 a few original faces (cheburashka: 4 of 13334 before step 5 and none after, against 42 with the 3D
-cotan Laplacian); a map with folds, qc_mean above ``QC_WARN`` or an unconverged Moebius optimiser
-carries ``report['warnings']``.
+cotan Laplacian); a map with folds, qc_mean above ``QC_WARN``, an unconverged Moebius optimiser or a
+mu_ratio below ``MU_WARN`` (``core.disk.flatten``) carries ``report['warnings']``.
 
 The per-triangle measures have a floor for *any* piecewise-linear map whose scale varies: a triangle's
 qc is at least the ratio of its edges' scale factors, so qc_mean - 1 is of the order of
@@ -370,7 +370,10 @@ def sphere_measures(V, F, S, per_face=False):
 
 def sphere_warnings(report: dict) -> list:
     """The warnings (list of str) a sphere map's ``report`` deserves: folded triangles, poor
-    conformality (qc_mean above ``QC_WARN``), a Moebius optimiser that did not converge."""
+    conformality (qc_mean above ``QC_WARN``), a Moebius optimiser that did not converge, and a
+    conformal factor whose ratio is below ``MU_WARN``: at the most uniform Moebius choice, long
+    protrusions such as limbs shrink to specks on the sphere; at another, the choice may be why."""
+    from ..disk.flatten import scale_variation
     out = []
     if report.get('flips'):
         out.append(f"{report['flips']} of {report['faces']} triangles are folded on the sphere (their "
@@ -379,6 +382,13 @@ def sphere_warnings(report: dict) -> list:
         out.append(f"the map is far from conformal: qc_mean {report['qc_mean']:.3g} > {QC_WARN}")
     if report.get('moebius_converged') is False:
         out.append("the Moebius optimiser did not converge: the uniform choice may not be optimal")
+    scale = scale_variation(report.get('mu_ratio', 1.0))
+    if scale and report.get('moebius', 'uniform') != 'uniform':
+        out.append(f"{scale}: choose the Moebius transformation for the most uniform scale "
+                   "(moebius='uniform', CLI --moebius uniform)")
+    elif scale:
+        out.append(f"{scale}: the sphere shrinks long protrusions to specks; for a texture, unwrap with "
+                   "seams through cones (cones='auto', CLI --cones auto) instead")
     return out
 
 
