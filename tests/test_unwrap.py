@@ -147,6 +147,21 @@ def test_warnings_on_bad_results_only():
     assert any('far from conformal' in w for w in res.warnings)
 
 
+def test_scale_warning_names_a_remedy_that_is_left():
+    """An island of the plain path with an extreme scale variation is told to take seams or cones; an
+    island cut through the cones the tool chose is told what is left (tiny triangles, the target or
+    the budget), not to choose cones."""
+    from core.atlas.unwrap import CONE_SCALE_REMEDY, island_warnings
+    from core.disk.flatten import SCALE_REMEDY
+    rep = {'mu_ratio': 2.4e-5, 'flips': 0, 'qc_mean': 1.02}
+    plain, = island_warnings(rep, 'the map')
+    coned, = island_warnings(rep, 'the map', cones=True)
+    assert 'mu_ratio 2.4e-05' in plain and plain.endswith(SCALE_REMEDY) and 'cones' in SCALE_REMEDY
+    assert 'mu_ratio 2.4e-05' in coned and coned.endswith(CONE_SCALE_REMEDY)
+    assert 'choose cones' not in coned and 'merge vertices by distance' in coned
+    assert island_warnings(dict(rep, mu_ratio=0.2), 'the map', cones=True) == []
+
+
 def _closed_octahedron():
     V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
     F = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])

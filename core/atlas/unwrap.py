@@ -143,10 +143,16 @@ def _measure(V, F, uv_corner):
     return meas, mu
 
 
-def island_warnings(rep: dict, desc: str) -> list:
+# what to do about an extreme scale variation on an island whose cones the tool chose already
+CONE_SCALE_REMEDY = ("merge vertices by distance where tiny triangles sit, or raise the target ratio or "
+                     "the cone budget")
+
+
+def island_warnings(rep: dict, desc: str, cones: bool = False) -> list:
     """Quality warnings of one island report (not its failure): flips, overlaps, qc_mean above
     ``QC_WARN``, a ``mu_ratio`` below ``MU_WARN``, an optimiser that did not converge, a failed
-    certificate."""
+    certificate. ``cones``: the island was cut through cones the tool chose (``CONE_SCALE_REMEDY``
+    names what is left to do about its scale, not ``SCALE_REMEDY``)."""
     out = []
     if rep.get('flips'):
         out.append(flip_warning(rep, desc))
@@ -157,7 +163,7 @@ def island_warnings(rep: dict, desc: str) -> list:
                    "coarse or too distorted for a good conformal map")
     mu = rep.get('mu_ratio')
     if mu is not None and scale_variation(mu):
-        out.append(f"{desc} has {scale_variation(mu)}; {SCALE_REMEDY}")
+        out.append(f"{desc} has {scale_variation(mu)}; {CONE_SCALE_REMEDY if cones else SCALE_REMEDY}")
     if rep.get('converged') is False:
         out.append(f"{desc}: the optimiser did not converge; the map is the best one found")
     if rep.get('bound_note'):
@@ -331,8 +337,9 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         if 'error' in r:
             warnings.append(f"skipped {r['error']}")
             continue
-        r['warnings'] = island_warnings(r, desc) + [f"{desc}: {w}" for w in r.get('warnings', [])
-                                                     if cones is not None and 'scale variation' not in w]
+        own = [f"{desc}: {w}" for w in r.get('warnings', [])
+               if cones is not None and 'scale variation' not in w]
+        r['warnings'] = island_warnings(r, desc, cones is not None) + own
         warnings += r['warnings']
     mirrored = summary.get('flips', 0) - sum(r.get('flips', 0) for r in islands if 'error' not in r)
     if mirrored > 0:
