@@ -337,7 +337,9 @@ def unwrap(V, F, *, seams=None, faces=None, tri_poly=None, boundary: str = 'unif
         if 'error' in r:
             warnings.append(f"skipped {r['error']}")
             continue
-        own = [f"{desc}: {w}" for w in r.get('warnings', [])
+        # the cone path's own warnings, named by island when there are several ("the map: the map is
+        # not conformal enough" said nothing twice)
+        own = [w if n_isl == 1 else f"{desc}: {w}" for w in r.get('warnings', [])
                if cones is not None and 'scale variation' not in w]
         r['warnings'] = island_warnings(r, desc, cones is not None) + own
         warnings += r['warnings']
