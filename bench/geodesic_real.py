@@ -18,7 +18,10 @@ Head-like disks (stand-ins for the held-out scans): ``--meshes cow-cut spot-cut2
 meshes by name (``meshes.PART_CUTS``: ``spot-rear cow-rear cheburashka-half rocker-half ogre-head``).
 Scan-like meshes of our own (random points with a denser patch, Delaunay-triangulated and lifted,
 with noise): ``--meshes facescan faceholes deepcap`` (``meshes.scan_like``). Closed CAD-like parts of
-slivers, in sphere mode: ``--meshes --sphere cylinderhull boxhull`` (``meshes.HULLS``).
+slivers, in sphere mode: ``--meshes --sphere cylinderhull boxhull`` (``meshes.HULLS``). Meshes made
+with Blender's own tools through bpy (``blender_made``: voxel-remeshed and decimated): ``--meshes
+figure-upper part-top suzvox-front figure-dec-upper suzvox-dec-front cow-dec-rear bunny-dec`` and, in
+sphere mode, ``--meshes --sphere figure part``.
 
 Errors: relative to the exact distance, mean and max over the vertices of the source's part farther
 than ``EXCLUDE`` times the part's bounding-box diagonal from the source; a vertex split by a seam counts
@@ -112,6 +115,15 @@ def load(name):
         from core.surfaces import hull_part
         V, F = hull_part(name[:-4])
         return V, F, None
+    import blender_made
+    if name in blender_made.NAMES:          # voxel-remeshed and decimated meshes made with bpy
+        got = blender_made.load(name)
+        return None if got is None else (*got, None)
+    if name in blender_made.CUTS:
+        from meshes import cut_disk
+        base, direction, height = blender_made.CUTS[name]
+        got = load(base)
+        return None if got is None else (*cut_disk(got[0], got[1], direction, height), None)
     from meshes import PART_CUTS
     if name in PART_CUTS:                   # other plane cuts of the public meshes: 'spot-rear', ...
         from meshes import cut_disk
