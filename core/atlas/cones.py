@@ -1444,6 +1444,7 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
     if not bl:
         fixed[0] = True                      # the ground of ConeSystem, whose factor is ``fac0``
     reuse = None                             # the cut of a new branch, checked already
+    warm = None                              # the last exact metric (n,) of this cone set
     while True:
         cut = reuse if reuse is not None else cut_along_seams(F, n, seams, twin=twin)
         reuse = None
@@ -1466,12 +1467,18 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
                 # difference to its linear start (the same solution, fewer damped Newton steps)
                 got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed,
                                        cold + cache['newton_shift'], fac0=fac0, krylov=True)
+            if got is None and warm is not None:
+                # a new branch changes the cut near it only: the last branch's exact metric is a
+                # start a few Newton steps from this one
+                got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, warm, fac0=fac0, krylov=big)
             if got is None:
                 got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, cold, fac0=fac0, krylov=big)
             if got is None:
                 got = flat_cone_metric(T, vert_of, n, 2 * np.pi - kap_all, fixed, np.zeros(n), krylov=big)
             if got is not None and big:
                 cache['newton_shift'] = got[0] - cold
+            if got is not None:
+                warm = got[0]
             if got is not None:
                 ang = corner_angles_l(got[1][T.FE])
                 wedge = np.bincount(T.F.ravel(), ang.ravel(), minlength=len(vert_of))[loop]
