@@ -411,6 +411,37 @@ def test_geodesic_sphere_mode_on_scans_against_exact(name):
     assert np.allclose(dp[inv], d0, rtol=1e-9, atol=1e-12)
 
 
+def test_geodesic_cache_answers_a_new_source_with_the_same_distances():
+    """A ``cache`` kept between calls holds the surface paths' graphs: a new source is answered with the
+    same distances as a call without it, without building the graphs again; another mesh empties it."""
+    import core.geodesic.paths as paths_mod
+    from core.sphere.geodesic import sphere_geodesic
+    V, F, S = _squeezed_icosphere()
+    cache = {}
+    d1, rep1 = sphere_geodesic(V, F, [5], S=S, cache=cache)
+    assert rep1['method'] == 'paths' and 'graphs' in cache
+    built = []
+    real = paths_mod.SteinerGraph.__init__
+
+    def counting(self, *a, **kw):
+        built.append(1)
+        real(self, *a, **kw)
+    paths_mod.SteinerGraph.__init__ = counting
+    try:
+        d2, rep2 = sphere_geodesic(V, F, [40], S=S, cache=cache)
+    finally:
+        paths_mod.SteinerGraph.__init__ = real
+    assert built == []                                   # the graphs were kept
+    np.testing.assert_array_equal(d2, sphere_geodesic(V, F, [40], S=S)[0])
+    np.testing.assert_array_equal(d1, sphere_geodesic(V, F, [5], S=S)[0])
+    assert rep2['steiner_points'] == rep1['steiner_points']
+    mesh = cache['mesh']
+    W = V * 1.5                                          # another mesh: the cache starts again
+    d3, _ = sphere_geodesic(W, F, [5], S=S, cache=cache)
+    assert cache['mesh'] != mesh
+    np.testing.assert_allclose(d3, 1.5 * d1, rtol=1e-9)
+
+
 def test_geodesic_marches_on_resolved_charts_beyond_the_paths_budget(monkeypatch):
     """With room for 3 Steiner points per edge only, 'auto' marches where the charts resolve the
     surface (S = V: the same result as method='charts') and still takes the paths where they do not

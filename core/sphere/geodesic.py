@@ -255,6 +255,20 @@ def default_sphere_grid(n_vertices):
     return int(np.clip(64 * np.ceil(4.0 * np.sqrt(n_vertices) / 64), 256, 768))
 
 
+def _mesh_cache(cache, V, F):
+    """The dict of the surface paths' graphs for the mesh ``V`` (n,3), ``F`` (m,3): ``cache`` itself
+    (emptied first if it held another mesh's, told apart by a hash of both arrays), or a new dict."""
+    if cache is None:
+        return {}
+    import hashlib
+    key = hashlib.blake2b(np.ascontiguousarray(V).tobytes() + np.ascontiguousarray(F).tobytes(),
+                          digest_size=16).hexdigest()
+    if cache.get('mesh') != key:
+        cache.clear()
+        cache['mesh'] = key
+    return cache
+
+
 def _on_repaired(fixed, root, V, src, S, **options):
     """``sphere_geodesic`` of the input mesh (vertices ``V`` (n,3)) answered on its repaired copy
     ``fixed`` (``core.mesh.repair.Repaired``; ``root`` (n,) or None, the vertices merged into others):
@@ -295,7 +309,7 @@ def _paths_points(V, F, k, cache):
 
 
 def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver='auto',
-                    overlap=GEO_OVERLAP_DEG, source_radius=8.0, progress=None, method='auto'):
+                    overlap=GEO_OVERLAP_DEG, source_radius=8.0, progress=None, method='auto', cache=None):
     """Geodesic distances on a closed genus-0 mesh: shortest surface paths whenever they fit their
     memory budget, else fast marching through its conformal sphere (``method``, below).
 
@@ -311,6 +325,10 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     report's ``warnings`` (list of str) name a folded sphere map, an area fraction above 1 % that the
     charts do not resolve (``unresolved_fraction``: surface cell above twice the triangle's mean edge),
     and more than 1 % of the vertices clamped.
+
+    ``cache``: an optional dict the caller keeps between calls (a repeated query, Blender's repeated
+    clicks): the surface paths' graphs and grading are kept in it and reused while ``V`` and ``F`` are
+    the same (it is emptied for another mesh), so a new source costs the searches only.
 
     ``method``: 'charts' marches on the two charts; 'paths' takes shortest paths on the mesh through
     Steiner points, Richardson-extrapolated (``core.geodesic.paths.surface_paths``); 'auto' (default)
@@ -345,14 +363,15 @@ def sphere_geodesic(V, F, sources, S=None, moebius='uniform', grid=None, solver=
     F, fixed, root = _repaired(V, F)
     if fixed is not None:
         return _on_repaired(fixed, root, V, src, S, moebius=moebius, grid=grid, solver=solver,
-                            overlap=overlap, source_radius=source_radius, progress=progress, method=method)
+                            overlap=overlap, source_radius=source_radius, progress=progress, method=method,
+                            cache=cache)
     if method not in GEO_METHODS:
         raise ConformalError(f"method must be one of {', '.join(GEO_METHODS)}, got {method!r}")
     if not 5.0 <= overlap <= 60.0:
         raise ConformalError("overlap must be between 5 and 60 degrees")
     report = {}
     k = path_points(len(F), len(unique_edges(F)[0]))
-    kept = {}                                  # the paths' graphs and grading, if they answer
+    kept = _mesh_cache(cache, V, F)            # the paths' graphs and grading, if they answer
     k_graded = _paths_points(V, F, k, kept) if method == 'auto' and k is not None else None
     direct = method == 'paths' or (k_graded is not None and k_graded >= SPHERE_PATH_K)
     if S is None and direct:
