@@ -1479,7 +1479,6 @@ def layout_cut(V, F, u, seams, cones, kappa, max_branches=16, cache=None, Lu=Non
                 cache['newton_shift'] = got[0] - cold
             if got is not None:
                 warm = got[0]
-            if got is not None:
                 ang = corner_angles_l(got[1][T.FE])
                 wedge = np.bincount(T.F.ravel(), ang.ravel(), minlength=len(vert_of))[loop]
         bad = np.nonzero((wedge > WEDGE_MAX) & ~np.isin(vert_of[loop], list(failed)))[0]
