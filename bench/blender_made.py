@@ -29,7 +29,9 @@ CUTS = {'figure-upper': ('figure', (0, 0, 1), -0.6), 'part-top': ('part', (0, 0,
 
 
 def _arrays(ob):
-    """(V, F) of the evaluated object ``ob`` (modifiers applied), triangulated by bmesh."""
+    """(V, F) of the evaluated object ``ob`` (modifiers applied), triangulated by bmesh, as Blender's
+    Triangulate and OBJ export give it. (The add-on's ``meshio.read_mesh`` reads the base mesh and
+    ignores modifiers by design; these meshes are the modifiers' output.)"""
     import bmesh
     import bpy
     me = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh()
