@@ -34,7 +34,9 @@ p1/p99 per triangle, qc_mean, flips and seconds.
 twice; a blob), with wall and CPU time, stage times and peak memory (``--big-extra``: also
 cheburashka and rocker-arm subdivided once, cow twice). Meshes are read from
 ``meshes.corpus_dir()`` (outside the repository); the script says so and skips a mesh that is
-missing. Cow's non-manifold vertex is split by ``cone_unwrap`` itself. Timings are noisy (shared machine)."""
+missing. Cow's non-manifold vertex is split by ``cone_unwrap`` itself. Timings are noisy (shared machine).
+``--meshes`` also takes the voxel-remeshed and decimated meshes of ``blender_made`` (``figure-dec``,
+``suzvox-dec``, ``cow-dec``, ...), built with bpy."""
 import argparse
 import os
 import resource
@@ -61,6 +63,10 @@ MOVING_CONES = {'spot': {16: 0.367, 41: 0.615}, 'cheburashka': {24: 0.383, 53: 0
 
 
 def load(name):
+    """(V, F) of a corpus mesh, or of a mesh made with Blender's tools (``blender_made.NAMES``)."""
+    import blender_made
+    if name in blender_made.NAMES:
+        return blender_made.load(name)
     path = os.path.join(MESHES, f'{name}.obj')
     if not os.path.exists(path):
         print(f"!! {path} is missing: the public meshes are not in the repository (set CONFORMAL_MESHES); "
