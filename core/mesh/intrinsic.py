@@ -495,7 +495,7 @@ def intrinsic_delaunay(V, F, mollify_delta=1e-4, max_rounds=10000, tol=1e-12, le
         negative_before=neg_before,
         negative_after=int(np.sum(w_after < -tol)),
         negative_boundary_after=int(np.sum((w_after < -tol) & ~interior)),
-        non_delaunay_after=int(np.sum(_non_delaunay(c0, EF, EC, tol, cot_rounding(l0, A0)))),
+        non_delaunay_after=int(np.sum(_non_delaunay(c0, EF, EC, tol, rho))),
     )
     T.report['converged'] = T.report['non_delaunay_after'] == 0
     return T
