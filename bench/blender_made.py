@@ -4,6 +4,9 @@ venv) for the benchmarks' generalisation runs: voxel-remeshed shapes and decimat
 - ``figure``: a body, a head, two arms and two legs (UV spheres and cylinders) joined and
   voxel-remeshed (Remesh modifier, voxel size 0.05): closed, genus 0, 22k triangles, long limbs, a
   few slivers and near-coincident vertices the remesher leaves.
+- ``hand``: a palm, four fingers and a thumb (a scaled UV sphere and cylinders) and a forearm, joined
+  and voxel-remeshed at 0.04; cut at the wrist (``hand-wrist``) it is a disk whose fingers the
+  conformal map shrinks 10^4-fold.
 - ``part``: a bevelled slab with a cylindrical boss (Boolean union), voxel-remeshed at 0.04: a
   CAD-like closed part, 29k triangles.
 - ``suzvox``: Suzanne voxel-remeshed at 0.05 (closed, genus 0, 13k triangles).
@@ -20,12 +23,14 @@ import numpy as np
 
 from meshes import corpus_dir
 
-NAMES = ('figure', 'part', 'suzvox', 'figure-dec', 'suzvox-dec', 'cow-dec', 'bunny-dec')
+NAMES = ('figure', 'hand', 'part', 'suzvox', 'figure-dec', 'suzvox-dec', 'cow-dec', 'bunny-dec')
 # name -> (mesh, direction, height): the figure above its waist (arms and head: long limbs), the
-# part's top, Suzanne's face, the decimated figure's and Suzanne's, the decimated cow's rear
+# part's top, Suzanne's face, the decimated figure's and Suzanne's, the decimated cow's rear, the hand
+# above its wrist
 CUTS = {'figure-upper': ('figure', (0, 0, 1), -0.6), 'part-top': ('part', (0, 0, 1), 0.1),
         'suzvox-front': ('suzvox', (0, -1, 0), 0.0), 'figure-dec-upper': ('figure-dec', (0, 0, 1), -0.6),
-        'suzvox-dec-front': ('suzvox-dec', (0, -1, 0), 0.0), 'cow-dec-rear': ('cow-dec', (-1, 0, 0), 0.5)}
+        'suzvox-dec-front': ('suzvox-dec', (0, -1, 0), 0.0), 'cow-dec-rear': ('cow-dec', (-1, 0, 0), 0.5),
+        'hand-wrist': ('hand', (0, 0, 1), -1.4)}
 
 
 def _arrays(ob):
@@ -83,6 +88,31 @@ def _figure():
     bpy.ops.object.join()
     _modifier(body, 'REMESH', mode='VOXEL', voxel_size=0.05)
     return body
+
+
+def _hand():
+    import bpy
+    _empty_scene()
+    add = bpy.ops.mesh
+    add.primitive_uv_sphere_add(radius=1.0, location=(0, 0, 0))
+    palm = bpy.context.active_object
+    palm.scale = (0.9, 0.35, 1.0)
+    parts = [palm]
+    for x, length in ((-0.5, 1.1), (-0.17, 1.35), (0.17, 1.3), (0.5, 1.0)):
+        add.primitive_cylinder_add(radius=0.13, depth=length, location=(x, 0, 0.75 + length / 2))
+        parts.append(bpy.context.active_object)
+    add.primitive_cylinder_add(radius=0.15, depth=1.0, location=(-1.0, 0, 0.1), rotation=(0, -0.9, 0))
+    parts.append(bpy.context.active_object)
+    add.primitive_cylinder_add(radius=0.4, depth=1.6, location=(0, 0, -1.3))
+    parts.append(bpy.context.active_object)
+    bpy.ops.object.select_all(action='DESELECT')
+    for p in parts:
+        p.select_set(True)
+    bpy.context.view_layer.objects.active = palm
+    bpy.ops.object.transform_apply(location=False, rotation=True, scale=True)
+    bpy.ops.object.join()
+    _modifier(palm, 'REMESH', mode='VOXEL', voxel_size=0.04)
+    return palm
 
 
 def _part():
@@ -143,7 +173,7 @@ def _decimated(ob, ratio):
 
 def load(name):
     """(V, F) of the Blender-made mesh ``name`` (one of ``NAMES``), or None (a corpus mesh missing)."""
-    make = {'figure': _figure, 'part': _part, 'suzvox': lambda: _suzanne(0.05),
+    make = {'figure': _figure, 'hand': _hand, 'part': _part, 'suzvox': lambda: _suzanne(0.05),
             'figure-dec': lambda: _decimated(_figure(), 0.1),
             'suzvox-dec': lambda: _decimated(_suzanne(0.02), 0.05),
             'cow-dec': lambda: _decimated(_corpus('cow'), 0.2),
