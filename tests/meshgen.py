@@ -206,6 +206,26 @@ def capped_cylinder(n=48, rings=12, r=1.0, height=1.5):
     return V, np.concatenate(F)
 
 
+def closed_end_tube(n=24, rings=40, height=8.0, seed=0):
+    """A test tube (a disk): an open n-sided tube of radius 1 and ``height``, closed at the top by a fan,
+    its inner rings moved along the axis by up to 0.3 of their spacing and its quads split along random
+    diagonals (an irregular triangulation). Its conformal map shrinks the closed end by about
+    ``exp(-height)``. Returns V ((rings + 1) n + 1, 3) with the open rim first, F (2 rings n + n, 3)."""
+    rng = np.random.default_rng(seed)
+    th = 2 * np.pi * np.arange(n) / n
+    z = np.repeat(np.linspace(0.0, height, rings + 1), n).reshape(rings + 1, n)
+    z[1:-1] += rng.uniform(-0.3, 0.3, (rings - 1, n)) * (height / rings)
+    V = np.c_[np.tile(np.cos(th), rings + 1), np.tile(np.sin(th), rings + 1), z.ravel()]
+    i, j = np.meshgrid(np.arange(n), np.arange(rings), indexing='ij')
+    a, b = (j * n + i).ravel(), (j * n + (i + 1) % n).ravel()
+    flip = (rng.random(len(a)) < 0.5)[:, None]
+    lower = np.where(flip, np.c_[a, b, a + n], np.c_[a, b, b + n])
+    upper = np.where(flip, np.c_[b, b + n, a + n], np.c_[a, b + n, a + n])
+    k = np.arange(n)
+    cap = np.c_[np.full(n, len(V)), rings * n + k, rings * n + (k + 1) % n]
+    return np.r_[V, [[0.0, 0.0, height]]], np.concatenate([lower, upper, cap])
+
+
 def icosphere(level=3):
     """Unit sphere (V (n,3), F (m,3), counter-clockwise seen from outside): the icosahedron with every
     triangle split in four ``level`` times, the new vertices pushed onto the sphere."""

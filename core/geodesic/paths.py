@@ -145,11 +145,13 @@ class SteinerGraph:
 
     SPARE = 256   # link slots of the virtual source (a point in a triangle needs 3 + 3k of them)
 
-    def __init__(self, V, F, k=STEINER, grade=None, edges=None, lengths=None, patches=None):
+    def __init__(self, V, F, k=STEINER, grade=None, edges=None, lengths=None, patches=None, spare=None):
         V = np.asarray(V, np.float64)
         F = np.asarray(F, np.int64)
         n = len(V)
         self.k, self.n = k, n
+        if spare is not None:               # room for this many links of the virtual source (``search_from``)
+            self.SPARE = max(int(spare), SteinerGraph.SPARE)
         self.intrinsic = lengths is not None
         ue, inv = mesh_edges(F) if edges is None else edges
         if lengths is not None:

@@ -112,6 +112,16 @@ SPOT_ANISO = 2.0
 SPOT_RINGS = 2
 SPOT_STEINER = 15
 SPOT_MAX_FACES = 2000
+# On a grid the user gives, a spot is a triangle whose surface cell exceeds SPOT_CELL_GIVEN of its mean
+# edge (four nodes an edge, so that the window's outer ring, where its paths start from the grid, is
+# resolved), the window takes every spot up to SPOT_MAX_FACES_GIVEN triangles, and its paths are
+# extrapolated from the graph of (SPOT_STEINER - 1) / 2 points too (Richardson, as ``SurfacePaths``): the
+# two graphs hold about 920 links a triangle (``path_links``), so 18M at most, within the paths' memory
+# budget (PATH_BUDGET). Under-resolved triangles
+# then take the paths' accuracy, not the on-mesh march's first order, and the error falls with the grid
+# (docs/geodesic.md, "Thirty-eighth session")
+SPOT_CELL_GIVEN = 0.25
+SPOT_MAX_FACES_GIVEN = 20_000
 
 
 # --------------------------------------------------------------------------------------------------
@@ -275,13 +285,17 @@ class SpotWindow:
 
     Where the window would hold more than ``SPOT_MAX_FACES`` triangles, it is built round the worst
     spots only (a severity threshold, the larger of cell / ``SPOT_CELL`` and anisotropy /
-    ``SPOT_ANISO``, found by bisection). ``ch`` a ``Chart`` (its grid rasterised). ``active`` False
-    when the chart has no spot."""
+    ``SPOT_ANISO``, found by bisection). On a grid the user gives (``ch.given``) a spot is a cell above
+    ``SPOT_CELL_GIVEN`` mean edges, the window may hold ``SPOT_MAX_FACES_GIVEN`` triangles, and the
+    paths are extrapolated from a second graph of half the points (``coarse``), so that the
+    triangles the grid cannot resolve take the paths' accuracy rather than ``MeshRelax``'s first
+    order. ``ch`` a ``Chart`` (its grid rasterised). ``active`` False when the chart has no spot."""
 
     def __init__(self, ch):
         G = ch.grid
         F, n = ch.F, len(ch.V)
-        severity = G.h / ch.mu_face / mean_edges(ch.V, F) / SPOT_CELL
+        cell, max_faces = (SPOT_CELL_GIVEN, SPOT_MAX_FACES_GIVEN) if ch.given else (SPOT_CELL, SPOT_MAX_FACES)
+        severity = G.h / ch.mu_face / mean_edges(ch.V, F) / cell
         if ch.ginv is not None:
             severity = np.maximum(severity, metric_anisotropy(ch.ginv) / SPOT_ANISO)
         spot = severity > 1.0
@@ -289,12 +303,12 @@ class SpotWindow:
         if not self.active:
             return
         win = _grow(F, spot, SPOT_RINGS, n)
-        if win.sum() > SPOT_MAX_FACES:
+        if win.sum() > max_faces:
             # too many: the worst spots, by a severity threshold found by bisection (in log)
             lo, hi = 0.0, float(np.log(severity.max()))
             for _ in range(12):
                 mid = 0.5 * (lo + hi)
-                if _grow(F, severity > np.exp(mid), SPOT_RINGS, n).sum() > SPOT_MAX_FACES:
+                if _grow(F, severity > np.exp(mid), SPOT_RINGS, n).sum() > max_faces:
                     lo = mid
                 else:
                     hi = mid
@@ -310,7 +324,6 @@ class SpotWindow:
         self.inner = np.flatnonzero(inner)
         self.faces = np.flatnonzero(win)
         self.used, Fl = np.unique(F[self.faces], return_inverse=True)
-        self.graph = SteinerGraph(ch.V[self.used], Fl.reshape(-1, 3), SPOT_STEINER)
         self.inner_local = np.searchsorted(self.used, self.inner)
         # the grid nodes inside the outermost ring's triangles, their 3D points, and their links to the
         # points on their triangle's boundary
@@ -324,9 +337,6 @@ class SpotWindow:
         f = face[nodes]
         ny, nx = G.shape
         X = surface_points(ch.V, F, ch.uv, f, G.origin + np.c_[nodes % nx, nodes // nx] * G.h)
-        self.cand, owner = self.graph.boundary(np.searchsorted(self.faces, f))
-        self.link = np.linalg.norm(self.graph.P[self.cand] - X[owner], axis=1)
-        self.node_of_link = nodes[owner]
         # and the vertices of the outermost ring that no inner-ring triangle holds (their sampled times)
         mid = np.zeros(n, bool)
         mid[F[within].ravel()] = True
@@ -334,16 +344,36 @@ class SpotWindow:
         ring[F[outer].ravel()] = True
         self.ring = np.flatnonzero(ring & ~mid)
         self.ring_local = np.searchsorted(self.used, self.ring)
+        # the graph, and on a given grid Richardson's pair (half the points, across the same flat
+        # patches); the virtual source of each has room for every seed (each node is joined to the
+        # 3 + 3k points on its triangle's boundary), so a search rewrites it in place
+        Fw = Fl.reshape(-1, 3)
 
-    def repair(self, T, dist, keep, loc, X_pts, pt_faces):
-        """Set ``dist`` (k,) at the inner vertices (not where ``keep`` (k,) is True) to the window's
-        shortest paths from the grid times ``T`` (ny, nx) of the outermost ring's nodes, from the
-        sampled times ``dist`` of its outer vertices, and from the sources inside the window: local
-        vertices ``loc`` (a,) and surface points ``X_pts`` (b,3) in local faces ``pt_faces`` (b,).
-        Returns the number of vertices set."""
-        t = T.ravel()[self.node_of_link]
+        def room(k):
+            return len(nodes) * (3 + 3 * k) + len(self.ring) + SteinerGraph.SPARE
+        self.graph = SteinerGraph(ch.V[self.used], Fw, SPOT_STEINER, spare=room(SPOT_STEINER))
+        k_half = (SPOT_STEINER - 1) // 2
+        self.coarse = SteinerGraph(ch.V[self.used], Fw, k_half, patches=self.graph.patches,
+                                   spare=room(k_half)) if ch.given else None
+        # per graph: the points each node is joined to, the links' lengths, and the node of each link
+        self.links = [self._node_links(g, np.searchsorted(self.faces, f), X, nodes)
+                      for g in (self.graph, self.coarse) if g is not None]
+
+    @staticmethod
+    def _node_links(graph, faces, X, nodes):
+        """(points (q,), lengths (q,), nodes (q,)): each grid node ``nodes`` (p,), at the 3D point ``X``
+        (p,3) in the window's triangle ``faces`` (p,), joined by straight segments to the points of
+        ``graph`` on that triangle's boundary."""
+        cand, owner = graph.boundary(faces)
+        return cand, np.linalg.norm(graph.P[cand] - X[owner], axis=1), nodes[owner]
+
+    def _search(self, graph, links, T, dist, loc, X_pts, pt_faces):
+        """(k,) the ``graph``'s shortest paths to the window's inner vertices from its seeds (see
+        ``repair``); ``links`` the graph's ``_node_links``; None when nothing seeds it."""
+        cand0, length, node = links
+        t = T.ravel()[node]
         ok = np.isfinite(t)
-        cand, w = self.cand[ok], t[ok] + self.link[ok]
+        cand, w = cand0[ok], t[ok] + length[ok]
         tv = dist[self.ring]
         okv = np.isfinite(tv)
         cand, w = np.r_[cand, self.ring_local[okv]], np.r_[w, tv[okv]]
@@ -354,12 +384,31 @@ class SpotWindow:
             lf = np.searchsorted(self.faces, pt_faces)
             inw = (lf < len(self.faces)) & (self.faces[np.minimum(lf, len(self.faces) - 1)] == pt_faces)
             if inw.any():
-                c2, o2 = self.graph.boundary(lf[inw])
+                c2, o2 = graph.boundary(lf[inw])
                 cand = np.r_[cand, c2]
-                w = np.r_[w, np.linalg.norm(self.graph.P[c2] - X_pts[inw][o2], axis=1)]
+                w = np.r_[w, np.linalg.norm(graph.P[c2] - X_pts[inw][o2], axis=1)]
         if not len(cand):
+            return None
+        return graph.search_from(cand, w)[self.inner_local]
+
+    def repair(self, T, dist, keep, loc, X_pts, pt_faces):
+        """Set ``dist`` (k,) at the inner vertices (not where ``keep`` (k,) is True) to the window's
+        shortest paths from the grid times ``T`` (ny, nx) of the outermost ring's nodes, from the
+        sampled times ``dist`` of its outer vertices, and from the sources inside the window: local
+        vertices ``loc`` (a,) and surface points ``X_pts`` (b,3) in local faces ``pt_faces`` (b,). With
+        the coarse graph (a given grid) the paths' excess is extrapolated away at the vertices, which
+        both graphs share: ``d_k - max(0, d_(k-1)/2 - d_k) / (2^STEINER_ORDER - 1)``. Returns the
+        number of vertices set."""
+        d = self._search(self.graph, self.links[0], T, dist, loc, X_pts, pt_faces)
+        if d is None:
             return 0
-        d = self.graph.search_from(cand, w)[self.inner_local]
+        dc = None if self.coarse is None else self._search(self.coarse, self.links[1], T, dist, loc, X_pts,
+                                                            pt_faces)
+        if dc is not None:
+            both = np.isfinite(dc) & np.isfinite(d)
+            corr = np.zeros(len(d))
+            corr[both] = (dc[both] - d[both]) / (2.0 ** STEINER_ORDER - 1.0)
+            d = d - np.maximum(corr, 0.0)
         sel = np.isfinite(d) & ~keep[self.inner]
         dist[self.inner[sel]] = d[sel]
         return int(sel.sum())
@@ -1534,6 +1583,7 @@ class Chart:
         # re-marches with the exact metric: as few as the target allows on an automatic grid, all of
         # them on a given one (its error then falls with the grid)
         self.planned_passes = METRIC_PASSES if grid is not None else metric_passes_for(self.excess, target)
+        self.given = grid is not None                   # a grid the user gave: its error should fall with it
         if grid is None:
             grid, self.limit, self.grid_estimate = default_grid_for_target(V, F, uv, mu_f, self.spread,
                                                                            self.reflex, target)
