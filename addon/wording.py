@@ -13,6 +13,8 @@ BLENDER_REMEDIES = {
                   "it open (Edge > Mark Seam), for example a loop around it and a seam across each half, or "
                   "use Sphere mode (Conformal sidebar)",
     'cut_handles': "mark seams that cut through every handle (Edge > Mark Seam)",
+    'seam_handles': "set Seams to Automatic (Conformal sidebar: seams through cones), or mark seams that cut "
+                    "it open and through every handle (Edge > Mark Seam); Sphere mode takes genus 0 only",
     'use_sphere': "use Sphere mode (Conformal sidebar), or mark a seam that cuts it open (Edge > Mark Seam)",
     'use_disk': "use Conformal Flatten (disk mode), or fill the holes (Mesh > Clean Up > Fill Holes)",
     'raise_limit': "decimate it (Decimate modifier, applied), or raise "

@@ -34,6 +34,8 @@ REMEDIES = {
                   "that cut it open (for example a seam loop around it plus a seam across each half), or use "
                   "sphere mode",
     'cut_handles': "mark seams that cut through every handle",
+    'seam_handles': "let the tool choose seams through cones (cones='auto', CLI --cones auto), or mark seams "
+                    "that cut it open and through every handle (sphere mode takes genus 0 only)",
     'use_sphere': "use sphere mode, or mark a seam that cuts it open",
     'use_disk': "use disk mode, or fill the holes",
     'raise_limit': "decimate it, or raise the size limit",

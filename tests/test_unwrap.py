@@ -147,6 +147,21 @@ def test_warnings_on_bad_results_only():
     assert any('far from conformal' in w for w in res.warnings)
 
 
+def test_a_closed_part_with_handles_is_not_sent_to_sphere_mode():
+    """A closed torus (genus 1) cannot take sphere mode: its error names the genus and offers cones or
+    seams through the handles; a closed genus-0 part keeps sphere mode among its remedies."""
+    from meshgen import icosphere, torus
+    V, F = torus()
+    with pytest.raises(ConformalError) as err:
+        unwrap(V, F)
+    assert err.value.code == 'no_boundary' and err.value.remedy == 'seam_handles'
+    assert 'genus 1' in str(err.value) and 'or use sphere mode' not in str(err.value)
+    V, F = icosphere(2)
+    with pytest.raises(ConformalError) as err:
+        unwrap(V, F)
+    assert err.value.remedy == 'mark_seams' and 'or use sphere mode' in str(err.value)
+
+
 def test_scale_warning_names_a_remedy_that_is_left():
     """An island of the plain path with an extreme scale variation is told to take seams or cones; an
     island cut through the cones the tool chose is told what is left (tiny triangles, the target or

@@ -215,10 +215,13 @@ def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
     from ..disk.flatten import flatten
     n = len(V)
     rep = {'loops': len(loops)}
-    if not loops:
-        raise ConformalError(f"{desc} is closed (it has no boundary)", 'no_boundary', 'mark_seams')
     chi = topology.euler_characteristic(F)
     genus = (2 - chi - len(loops)) // 2
+    if not loops:
+        # sphere mode is a remedy only for a closed part of genus 0
+        raise ConformalError(f"{desc} is closed (it has no boundary)" +
+                             (f" and has genus {genus}" if genus > 0 else ""), 'no_boundary',
+                             'seam_handles' if genus > 0 else 'mark_seams')
     if genus > 0:
         raise ConformalError(f"{desc} has genus {genus} (Euler characteristic {chi} with {len(loops)} "
                              f"boundary loop(s))", 'genus', 'cut_handles')

@@ -1870,10 +1870,12 @@ class GeodesicSolver:
             if not np.isfinite(uvs[verts]).all():          # a closed or cut part (``_append_closed``)
                 ch = PathsChart(Vs[verts], Fl, verts, faces, CUT_PATH_BUDGET if cut_face[faces[0]] else None)
                 if ch.paths_k is None:
+                    from ..mesh.topology import euler_characteristic
+                    genus = (2 - euler_characteristic(Fl)) // 2
                     raise ConformalError(
-                        f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles) is closed and too large "
-                        "for surface paths: mark seams that cut it open, or use sphere mode",
-                        'no_boundary', 'mark_seams')
+                        f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles) is closed" +
+                        (f", has genus {genus}" if genus > 0 else "") + " and is too large for surface paths",
+                        'no_boundary', 'seam_handles' if genus > 0 else 'mark_seams')
             else:
                 # a flat island in its plane, or with no interior vertex (a hair card bent out of its
                 # plane, a strip) in its isometric unfolding: a flat domain with the same distances
