@@ -64,6 +64,20 @@ def _empty_scene():
     bpy.ops.wm.read_factory_settings(use_empty=True)
 
 
+def _joined(parts, voxel):
+    """The objects ``parts`` joined into the first, their transforms applied, with a voxel Remesh
+    modifier of ``voxel`` size."""
+    import bpy
+    bpy.ops.object.select_all(action='DESELECT')
+    for p in parts:
+        p.select_set(True)
+    bpy.context.view_layer.objects.active = parts[0]
+    bpy.ops.object.transform_apply(location=False, rotation=True, scale=True)
+    bpy.ops.object.join()
+    _modifier(parts[0], 'REMESH', mode='VOXEL', voxel_size=voxel)
+    return parts[0]
+
+
 def _figure():
     import bpy
     _empty_scene()
@@ -80,14 +94,7 @@ def _figure():
     for x in (0.35, -0.35):
         add.primitive_cylinder_add(radius=0.18, depth=2.2, location=(x, 0, -1.9))
         parts.append(bpy.context.active_object)
-    bpy.ops.object.select_all(action='DESELECT')
-    for p in parts:
-        p.select_set(True)
-    bpy.context.view_layer.objects.active = body
-    bpy.ops.object.transform_apply(location=False, rotation=True, scale=True)
-    bpy.ops.object.join()
-    _modifier(body, 'REMESH', mode='VOXEL', voxel_size=0.05)
-    return body
+    return _joined(parts, 0.05)
 
 
 def _hand():
@@ -105,14 +112,7 @@ def _hand():
     parts.append(bpy.context.active_object)
     add.primitive_cylinder_add(radius=0.4, depth=1.6, location=(0, 0, -1.3))
     parts.append(bpy.context.active_object)
-    bpy.ops.object.select_all(action='DESELECT')
-    for p in parts:
-        p.select_set(True)
-    bpy.context.view_layer.objects.active = palm
-    bpy.ops.object.transform_apply(location=False, rotation=True, scale=True)
-    bpy.ops.object.join()
-    _modifier(palm, 'REMESH', mode='VOXEL', voxel_size=0.04)
-    return palm
+    return _joined(parts, 0.04)
 
 
 def _part():
