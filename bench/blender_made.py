@@ -78,14 +78,19 @@ def _joined(parts, voxel):
     return parts[0]
 
 
-def _figure():
+def _ellipsoid(scale):
+    """A fresh scene holding a unit UV sphere scaled by ``scale`` (3,): the list of its one object."""
     import bpy
     _empty_scene()
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, location=(0, 0, 0))
+    bpy.context.active_object.scale = scale
+    return [bpy.context.active_object]
+
+
+def _figure():
+    import bpy
     add = bpy.ops.mesh
-    add.primitive_uv_sphere_add(radius=1.0, location=(0, 0, 0))
-    body = bpy.context.active_object
-    body.scale = (0.8, 0.6, 1.2)
-    parts = [body]
+    parts = _ellipsoid((0.8, 0.6, 1.2))
     add.primitive_uv_sphere_add(radius=0.55, location=(0, 0, 1.7))
     parts.append(bpy.context.active_object)
     for x, rot in ((0.9, 0.9), (-0.9, -0.9)):
@@ -99,12 +104,8 @@ def _figure():
 
 def _hand():
     import bpy
-    _empty_scene()
     add = bpy.ops.mesh
-    add.primitive_uv_sphere_add(radius=1.0, location=(0, 0, 0))
-    palm = bpy.context.active_object
-    palm.scale = (0.9, 0.35, 1.0)
-    parts = [palm]
+    parts = _ellipsoid((0.9, 0.35, 1.0))
     for x, length in ((-0.5, 1.1), (-0.17, 1.35), (0.17, 1.3), (0.5, 1.0)):
         add.primitive_cylinder_add(radius=0.13, depth=length, location=(x, 0, 0.75 + length / 2))
         parts.append(bpy.context.active_object)
