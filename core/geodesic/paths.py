@@ -556,10 +556,8 @@ class SurfacePaths:
         fine, n = self.fine, self.fine.n
         dS = fine.search(src, X, src_faces)
         dC = self.coarse.search(src, X, src_faces)
-        fine_at = self.fine_at
-        ok = np.isfinite(dC) & np.isfinite(dS[fine_at])
         corr = np.zeros(len(dS))
-        corr[fine_at[ok]] = (dC[ok] - dS[fine_at[ok]]) / (2.0 ** STEINER_ORDER - 1.0)
+        corr[self.fine_at] = richardson_excess(dC, dS[self.fine_at])
         # fine points 0, 2, ..., k-1 of each edge: the mean of their two neighbours (vertex or shared point)
         corr[self.even] = 0.5 * (corr[self.before] + corr[self.after])
         dS = dS - np.maximum(corr, 0.0)
@@ -568,6 +566,17 @@ class SurfacePaths:
         dv[self.used] = dS[self.used]
         ev[self.used] = np.maximum(corr[self.used], 0.0)
         return dv, dS, ev
+
+
+def richardson_excess(d_half, d_k):
+    """The estimated excess (q,) of the ``k``-point paths ``d_k`` (q,) over the geodesic at points that
+    the graph of ``(k - 1) / 2`` points per edge shares, from its paths ``d_half`` (q,):
+    ``(d_half - d_k) / (2^STEINER_ORDER - 1)`` (Richardson's extrapolation), 0 where either is not
+    finite. It may be negative; callers subtract only a positive excess."""
+    ok = np.isfinite(d_half) & np.isfinite(d_k)
+    out = np.zeros(len(d_k))
+    out[ok] = (d_half[ok] - d_k[ok]) / (2.0 ** STEINER_ORDER - 1.0)
+    return out
 
 
 def steiner_distances(V, F, src=None, X=None, src_faces=None, k=STEINER, extrapolate=False, excess=False,

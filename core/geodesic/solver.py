@@ -60,8 +60,8 @@ from ..mesh.measures import signed_uv_areas, vertex_mu
 from .planar import plane_coordinates, planar_paths
 from ..atlas.unfold import unfold_flat_disk
 from .paths import (PATH_BUDGET, PATH_ERROR_9, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, SteinerGraph,
-                    path_points, path_triangulation, start_k, target_k, thin_warning, steiner_distances,
-                    surface_paths)
+                    path_points, path_triangulation, richardson_excess, start_k, target_k, thin_warning,
+                    steiner_distances, surface_paths)
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
 METHODS = ('auto', 'grid', 'paths')
@@ -405,10 +405,7 @@ class SpotWindow:
         dc = None if self.coarse is None else self._search(self.coarse, self.links[1], T, dist, loc, X_pts,
                                                             pt_faces)
         if dc is not None:
-            both = np.isfinite(dc) & np.isfinite(d)
-            corr = np.zeros(len(d))
-            corr[both] = (dc[both] - d[both]) / (2.0 ** STEINER_ORDER - 1.0)
-            d = d - np.maximum(corr, 0.0)
+            d = d - np.maximum(richardson_excess(dc, d), 0.0)
         sel = np.isfinite(d) & ~keep[self.inner]
         dist[self.inner[sel]] = d[sel]
         return int(sel.sum())
