@@ -119,15 +119,11 @@ def load(name):
     if name in blender_made.NAMES:          # voxel-remeshed and decimated meshes made with bpy
         got = blender_made.load(name)
         return None if got is None else (*got, None)
-    if name in blender_made.CUTS:
-        from meshes import cut_disk
-        base, direction, height = blender_made.CUTS[name]
-        got = load(base)
-        return None if got is None else (*cut_disk(got[0], got[1], direction, height), None)
     from meshes import PART_CUTS
-    if name in PART_CUTS:                   # other plane cuts of the public meshes: 'spot-rear', ...
+    plane_cuts = {**PART_CUTS, **blender_made.CUTS}   # plane cuts: 'spot-rear', ..., 'figure-upper', ...
+    if name in plane_cuts:
         from meshes import cut_disk
-        base, direction, height = PART_CUTS[name]
+        base, direction, height = plane_cuts[name]
         got = load(base)
         return None if got is None else (*cut_disk(got[0], got[1], direction, height), None)
     if '-cut' in name:                      # head-like disks of bench/cones.py: 'cow-cut', 'spot-cut2', ...
