@@ -1579,8 +1579,8 @@ class Chart:
         self.limit, self.grid_estimate = None, None
         # re-marches with the exact metric: as few as the target allows on an automatic grid, all of
         # them on a given one (its error then falls with the grid)
-        self.planned_passes = METRIC_PASSES if grid is not None else metric_passes_for(self.excess, target)
         self.given = grid is not None                   # a grid the user gave: its error should fall with it
+        self.planned_passes = METRIC_PASSES if self.given else metric_passes_for(self.excess, target)
         if grid is None:
             grid, self.limit, self.grid_estimate = default_grid_for_target(V, F, uv, mu_f, self.spread,
                                                                            self.reflex, target)
