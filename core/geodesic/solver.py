@@ -1948,16 +1948,16 @@ class GeodesicSolver:
         self.seconds = seconds
 
     # ----------------------------------------------------------------------------------------------
-    def _warning(self, chart, est):
-        """The warning for ``chart`` (index) whose estimate ``est`` is above the target, or None."""
+    def _warning(self, chart, est, k_used=None):
+        """The warning for ``chart`` (index) whose estimate ``est`` is above the target, or None;
+        ``k_used``: the Steiner points per edge its surface paths took (None: it marched)."""
         if est <= self.error_target:
             return None
         ch = self.charts[chart]
         where = f" on island {chart + 1} of {len(self.charts)}" if len(self.charts) > 1 else ""
         if ch.paths_k:
-            return (f"estimated mean error {100 * est:.3g}%{where} is above the target "
-                    f"{100 * self.error_target:.3g}% (surface paths: the memory budget allows no more "
-                    "Steiner points per edge): subdivide the mesh")
+            return f"estimated mean error {100 * est:.3g}%{where} is above the target " \
+                f"{100 * self.error_target:.3g}% ({self._paths_limit(ch, k_used)}"
         msg = (f"estimated mean error {100 * est:.3g}%{where} is above the target "
                f"{100 * self.error_target:.3g}% (grid {ch.size}")
         if ERR_ANISO * ch.excess > 0.5 * self.error_target:
@@ -1973,6 +1973,23 @@ class GeodesicSolver:
         elif ch.limit == 'budget':
             msg += f", the islands' automatic grids share a budget of {NODE_BUDGET:,} nodes"
         return msg + "): use a larger grid, or a more uniform map (boundary 'uniform')"
+
+    def _paths_limit(self, ch, k):
+        """What held the surface paths of the chart ``ch`` at ``k`` Steiner points per edge, and what to
+        do, for ``_warning``. The memory budget buys about ``sqrt(PATH_BUDGET / 3 m)`` points per edge
+        on ``m`` triangles and the paths' error falls as ``k^-STEINER_ORDER`` (``target_k``): on the same
+        surface, more triangles (a subdivision) leave fewer points and a larger error, fewer triangles
+        more points."""
+        k = k or ch.paths_k
+        if self.steiner_points:
+            return (f"surface paths at {k} Steiner points per edge, as asked): use more points per edge, "
+                    "or let the tool choose them for the target (steiner_points=None)")
+        if k < PATH_K_MAX:
+            return (f"surface paths at {k} Steiner points per edge, the most the memory budget allows on "
+                    f"{len(ch.F):,} triangles): raise the error target, or use a mesh with fewer triangles "
+                    "(a finer mesh leaves fewer points per edge and a larger error)")
+        return (f"surface paths at {k} Steiner points per edge, the most they refine to): raise the error "
+                "target")
 
     def _upper_bound(self, src_split, pf, pb):
         """Shortest edge-path lengths (N,) on the cut surface from the split source vertices and the
@@ -2042,7 +2059,7 @@ class GeodesicSolver:
         dist_s = np.full(N, np.inf)
         marches, radii, reached = 0, [], 0
         hybrid, refined = 0, 0
-        path_est, path_k, unseeded, thin, planar = {}, [], [], [], []
+        path_est, path_k, paths_used, unseeded, thin, planar = {}, [], {}, [], [], []
         active = np.unique(np.r_[self.chart_of_split[src_split], self.face_island[pf]]).astype(np.int64)
         for k, c in enumerate(active):
             say(0.05 + 0.85 * k / len(active), 'marching')
@@ -2092,6 +2109,7 @@ class GeodesicSolver:
                                                        self.error_target, cache=ch.paths_cache,
                                                        fit_grading=not self.steiner_points)
                 path_k.append(k_used)
+                paths_used[c] = k_used
                 thin.append(thin_warning(ch.paths_cache.get('short'),
                                          f" on island {c + 1} of {len(self.charts)}" if len(self.charts) > 1
                                          else ""))
@@ -2145,8 +2163,8 @@ class GeodesicSolver:
             ests.append(error_estimate(ch.cell, float(np.median(dc)) if len(dc) else 0.0, ch.spread,
                                        ch.reflex, ch.free_frac, ch.excess, ch.metric_passes))
         est = max(ests)
-        warnings = [w for w in (self._warning(c, e) for c, e in zip(active, ests)) if w] + \
-            [w for w in thin if w]
+        warnings = [self._warning(c, e, paths_used.get(c)) for c, e in zip(active, ests)]
+        warnings = [w for w in warnings + thin if w]
         if unseeded:
             where = "" if len(self.charts) == 1 else \
                 f" on island{'s' if len(unseeded) > 1 else ''} {', '.join(str(c + 1) for c in unseeded)}"
