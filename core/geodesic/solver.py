@@ -100,6 +100,12 @@ FINE_MAX_FACES = 3000
 FINE_ANISO = 1.1      # or where a triangle at the source has a metric anisotropy sqrt(l_max / l_min) above
 # this (1.15 before the twenty-first round: a lifted hemisphere's rim source at 1.13-1.15 took the plain
 # seed and came out 0.19 % short everywhere; 0.04 % with the refined one)
+# On a grid the user gives, the refined seed's paths take this many Steiner points per edge (STEINER on an
+# automatic grid): their error (as k^-STEINER_ORDER) is a floor under the grid's, and at STEINER it held
+# a lifted hemisphere's rim sources at 0.03-0.055 % mean from 512 to 1024 (one rising); at 31 they fall,
+# 0.017-0.019 -> 0.015-0.017 % (docs/geodesic.md, "Thirty-ninth session"). At most FINE_MAX_FACES
+# triangles: about 11M links for the two graphs, within the paths' memory budget
+FINE_STEINER_GIVEN = 31
 FINE_BAND = 8.0      # cells (at the node's own mu) inside tau where grid nodes take every Steiner path
 FINE_EDGES = 16.0     # the window reaches at least this many mean 3D edges of the source's triangles
 # Spots (docs/geodesic.md, "Spots"): triangles whose surface cell h / mu exceeds SPOT_CELL times their mean
@@ -2353,7 +2359,8 @@ class GeodesicSolver:
         ``mu`` the smallest of theirs), or a triangle at the source has a metric anisotropy
         ``sqrt(l_max / l_min)`` above ``FINE_ANISO``, the grid's isotropic or directional speeds leave a
         deficit near the source that travels outward. There the seed takes shortest paths on the mesh
-        through ``STEINER`` points per edge, Richardson-extrapolated (``steiner_distances``), over the
+        through ``STEINER`` points per edge (``FINE_STEINER_GIVEN`` on a grid the user gives),
+        Richardson-extrapolated (``steiner_distances``), over the
         triangles within ``FINE_WINDOW`` cells (UV) or ``FINE_EDGES`` mean 3D edges (not on a
         similarity chart) of the source (the connected part holding it, at most ``FINE_MAX_FACES``, the
         nearest in 3D). They hold up to ``tau``, the 3D distance from the source to the window's cut
@@ -2446,7 +2453,8 @@ class GeodesicSolver:
             # shortest paths on the window's surface through Steiner points on its edges (exact in
             # the limit; an upper bound, a path on the surface, at any STEINER)
             dv, dS, pts3, graph = steiner_distances(ch.V, Fw, loc[i] if i < len(loc) else None, Xs,
-                                                    star if i >= len(loc) else None, STEINER,
+                                                    star if i >= len(loc) else None,
+                                                    FINE_STEINER_GIVEN if ch.given else STEINER,
                                                     extrapolate=True, graded=True)
             tau = min(tau, float(np.max(dv[sv][np.isfinite(dv[sv])])))
             # the chart's grid nodes in the window: the shortest path to a point on their triangle's
