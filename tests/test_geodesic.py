@@ -1322,24 +1322,29 @@ def test_a_lifted_hemisphere_s_rim_sources_take_graded_refined_seeds():
 
 
 def test_on_a_given_grid_refined_seeds_take_enough_points_for_the_error_to_fall():
-    """The lifted hemisphere's three rim sources on grids the user gives (512, then 1024): each takes
-    the refined seed, whose Steiner paths are a floor under the grid's error. At ``STEINER`` (15) points
-    per edge they held the mean at 0.055 / 0.043 / 0.033 % at 512, and one source rose at 1024 (0.043 ->
-    0.044 %); at ``FINE_STEINER_GIVEN`` (31) 0.018 / 0.019 / 0.017 %, and every source falls at 1024."""
+    """The lifted hemisphere's three rim sources on grids the user gives (512, then 1024), one at a time
+    and together: each takes the refined seed, whose Steiner paths are a floor under the grid's error.
+    At ``STEINER`` (15) points per edge they held the mean at 0.055 / 0.043 / 0.033 % at 512 (max 1.09
+    %), and one source rose at 1024 (0.043 -> 0.044 %); at ``FINE_STEINER_GIVEN`` (31) 0.018 / 0.019 /
+    0.017 %, and every source falls at 1024. Together (exact: the nearest of the three), a window's
+    values where another source is nearer in 3D were dropped for the march's: 0.018 -> 0.021 % from 512
+    to 1024; bounding the march's from above there, 0.016 -> 0.014 %."""
     ref = np.load(os.path.join(DATA, 'geodesic_ref_lifted_hemisphere.npz'))
     V, F = ref['V'], ref['F'].astype(np.int64)
     diag = np.linalg.norm(np.ptp(V, axis=0))
+    sources = [int(s) for s in ref['sources']]
+    sets = [([s], D) for s, D in zip(sources, ref['dist'])] + [(sources, ref['dist'].min(0))]
     means = {}
     for grid in (512, 1024):
         gs = geo.GeodesicSolver(V, F, grid=grid)
-        for s, D in zip(ref['sources'], ref['dist']):
-            d, rep = gs.distance([int(s)])
-            far = np.linalg.norm(V - V[s], axis=1) > 0.02 * diag
+        for j, (src, D) in enumerate(sets):
+            d, rep = gs.distance(src)
+            far = np.min(np.linalg.norm(V[:, None] - V[src][None], axis=2), 1) > 0.02 * diag
             e = np.abs(d[far] - D[far]) / D[far]
-            assert rep['refined_sources'] == 1 and e.max() < 0.01, (grid, s, e.max())
-            means[grid, int(s)] = e.mean()
-    for s in ref['sources']:
-        assert means[512, int(s)] < 2.5e-4 and means[1024, int(s)] < means[512, int(s)], means
+            assert rep['refined_sources'] == len(src) and e.max() < 0.01, (grid, src, e.max())
+            means[grid, j] = e.mean()
+    for j in range(len(sets)):
+        assert means[512, j] < 2.5e-4 and means[1024, j] < means[512, j], means
 
 def test_a_mesh_of_needles_takes_intrinsic_surface_paths_by_default():
     """The same lifted hemisphere at default settings: its needles make the surface paths search the
