@@ -1781,7 +1781,8 @@ def test_paths_held_by_the_memory_budget_do_not_advise_a_finer_mesh(monkeypatch)
     budget holds the 1280-triangle sphere at 7 Steiner points per edge and its 4x subdivision at 3
     (measured against exact MMP: 0.047 % and 0.23 % mean), so the warning names the points and the
     triangles and advises fewer triangles or a looser target, not the subdivision it used to advise;
-    with the points given (``steiner_points``) it says they were asked for."""
+    with the points given (``steiner_points``) it says they were asked for, and where the budget had
+    room for more points it blames no budget."""
     from core.geodesic import paths
     from meshgen import icosphere
     monkeypatch.setattr(paths, 'PATH_BUDGET', 300_000)
@@ -1800,6 +1801,11 @@ def test_paths_held_by_the_memory_budget_do_not_advise_a_finer_mesh(monkeypatch)
     d, rep = geo.GeodesicSolver(V, F, error_target=2e-4, steiner_points=5).distance(0)
     [w] = rep['warnings']
     assert 'at 5 Steiner points per edge, as asked' in w and 'budget' not in w, w
+    # with the budget's room, a target beyond what the most points reach: no budget is blamed
+    monkeypatch.undo()
+    d, rep = geo.GeodesicSolver(V, F, error_target=1e-5).distance(0)
+    [w] = rep['warnings']
+    assert 'budget' not in w and 'raise the error target' in w and 'fewer triangles' not in w, w
 
 def test_intrinsic_paths_keep_two_edges_between_the_same_vertices_apart():
     """Flips to the intrinsic Delaunay triangulation can join two vertices by two different edges (on a

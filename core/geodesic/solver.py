@@ -60,8 +60,8 @@ from ..mesh.measures import signed_uv_areas, vertex_mu
 from .planar import plane_coordinates, planar_paths
 from ..atlas.unfold import unfold_flat_disk
 from .paths import (PATH_BUDGET, PATH_ERROR_9, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, SteinerGraph,
-                    path_points, path_triangulation, richardson_excess, start_k, target_k, thin_warning,
-                    steiner_distances, surface_paths)
+                    mesh_edges, path_points, path_triangulation, richardson_excess, start_k, target_k,
+                    thin_warning, steiner_distances, surface_paths)
 
 SOLVERS = ('auto', 'skfmm', 'sweep')
 METHODS = ('auto', 'grid', 'paths')
@@ -1990,12 +1990,12 @@ class GeodesicSolver:
         if self.steiner_points:
             return (f"surface paths at {k} Steiner points per edge, as asked): use more points per edge, "
                     "or let the tool choose them for the target (steiner_points=None)")
-        if k < PATH_K_MAX:
+        n_edges = ch.paths_cache.get('n_edges') or len(mesh_edges(ch.F)[0])
+        if k < PATH_K_MAX and path_points(len(ch.F), n_edges, k_min=k + 2, k_max=PATH_K_MAX) is None:
             return (f"surface paths at {k} Steiner points per edge, the most the memory budget allows on "
                     f"{len(ch.F):,} triangles): raise the error target, or use a mesh with fewer triangles "
                     "(a finer mesh leaves fewer points per edge and a larger error)")
-        return (f"surface paths at {k} Steiner points per edge, the most they refine to): raise the error "
-                "target")
+        return f"surface paths at {k} Steiner points per edge): raise the error target"
 
     def _upper_bound(self, src_split, pf, pb):
         """Shortest edge-path lengths (N,) on the cut surface from the split source vertices and the
