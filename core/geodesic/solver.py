@@ -2338,7 +2338,9 @@ class GeodesicSolver:
             # 1024: +40 % at a boundary vertex before)
             touch = bilinear(pocket.astype(np.float64), ch.P, sample, ch.corner_ok) > 0
             dist[touch] = np.inf
-        dist = np.where(np.isfinite(fixed), fixed, np.fmin(np.fmin(dist, near), claim))
+        dist = np.where(np.isfinite(fixed), fixed, np.fmin(dist, near))
+        # (a vertex no march reached stays unreached, to be filled from its neighbours as alone)
+        dist = np.where(np.isfinite(dist), np.fmin(dist, claim), dist)
         if ch.free is not None:                     # under-resolved triangles: on-mesh fast marching
             # (not where a refined seed's window gave the shortest paths: those are exact to the
             # Steiner points' excess; the on-mesh march is first order, +4.7 % at a vertex 0.1 units
