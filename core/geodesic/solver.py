@@ -2366,10 +2366,10 @@ class GeodesicSolver:
         ``sqrt(l_max / l_min)`` above ``FINE_ANISO``, the grid's isotropic or directional speeds leave a
         deficit near the source that travels outward. There the seed takes shortest paths on the mesh
         through ``STEINER`` points per edge (``FINE_STEINER_GIVEN`` on a grid the user gives),
-        Richardson-extrapolated (``steiner_distances``), over the
-        triangles within ``FINE_WINDOW`` cells (UV) or ``FINE_EDGES`` mean 3D edges (not on a
-        similarity chart) of the source (the connected part holding it, at most ``FINE_MAX_FACES``, the
-        nearest in 3D). They hold up to ``tau``, the 3D distance from the source to the window's cut
+        Richardson-extrapolated (``steiner_distances``), over the triangles within ``FINE_WINDOW``
+        cells (UV) or ``FINE_EDGES`` mean 3D edges (not on a similarity chart) of the source (the
+        connected part holding it, at most ``FINE_MAX_FACES``, the nearest in 3D). They hold up to
+        ``tau``, the 3D distance from the source to the window's cut
         boundary: no geodesic shorter than that leaves the window. A grid node within ``FINE_BAND`` of
         its cells inside ``tau`` takes the shortest path to a point of its triangle's boundary plus the
         straight segment to it in the triangle; deeper nodes the path through a corner; nodes more than
