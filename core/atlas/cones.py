@@ -1685,7 +1685,7 @@ def cone_unwrap(V, F, *, cones=None, target_ratio=0.5, max_cones=48, sweeps=MOVE
     t = time.perf_counter()
     system = ConeSystem(Vw, Fw)
     timings['factor'] = time.perf_counter() - t
-    genus = (2 - system.chi - len(system.loops)) // 2
+    genus = topology.genus(system.chi, len(system.loops))
     t = time.perf_counter()
     history = []
     if cones is None and system.loops and planar_map(Vw, Fw) is not None:

@@ -105,7 +105,7 @@ def homology_loops(V, F, root=None, inner=None):
         Fc = np.vstack([F] + caps)
     nc = len(Vc)
     chi = topology.euler_characteristic(Fc)
-    genus = (2 - chi) // 2
+    genus = topology.genus(chi)
     if genus <= 0:
         return np.zeros((0, 2), np.int64)
     E, w, Gi = edge_list(Vc, Fc, inner)

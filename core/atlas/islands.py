@@ -216,7 +216,7 @@ def _flatten_island(V, F, loops, holes, boundary, desc, progress, options):
     n = len(V)
     rep = {'loops': len(loops)}
     chi = topology.euler_characteristic(F)
-    genus = (2 - chi - len(loops)) // 2
+    genus = topology.genus(chi, len(loops))
     if not loops:
         # sphere mode is a remedy only for a closed part of genus 0
         raise ConformalError(f"{desc} is closed (it has no boundary)" +

@@ -1873,8 +1873,8 @@ class GeodesicSolver:
             if not np.isfinite(uvs[verts]).all():          # a closed or cut part (``_append_closed``)
                 ch = PathsChart(Vs[verts], Fl, verts, faces, CUT_PATH_BUDGET if cut_face[faces[0]] else None)
                 if ch.paths_k is None:
-                    from ..mesh.topology import euler_characteristic
-                    genus = (2 - euler_characteristic(Fl)) // 2
+                    from ..mesh import topology
+                    genus = topology.genus(topology.euler_characteristic(Fl))
                     raise ConformalError(
                         f"island {c + 1} of {len(cuts) + 1} ({len(faces)} triangles) is closed" +
                         (f", has genus {genus}" if genus > 0 else "") + " and is too large for surface paths",

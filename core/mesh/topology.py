@@ -207,6 +207,12 @@ def euler_characteristic(F, n_edges=None):
     return nv - ne + len(F)
 
 
+def genus(chi, n_loops=0):
+    """The genus of a connected orientable surface of Euler characteristic ``chi`` with ``n_loops``
+    boundary loops: ``(2 - chi - n_loops) / 2``."""
+    return (2 - chi - n_loops) // 2
+
+
 def vertex_fans(F, n, twin=None):
     """(n,) number of edge-connected fans of triangles around each vertex. A manifold vertex has 1;
     2 or more means the surface pinches there (a non-manifold vertex)."""

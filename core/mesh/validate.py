@@ -180,7 +180,7 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
             raise ConformalError(f"mesh has {len(loops)} boundary loops; disk mode needs exactly one: "
                                  "mark seams or fill holes", 'holes')
         if chi != 1:
-            genus = (2 - chi - len(loops)) // 2
+            genus = topology.genus(chi, len(loops))
             raise ConformalError(f"mesh has one boundary loop but genus {genus} (Euler characteristic "
                                  f"{chi}, a disk has 1): mark seams that cut it into a disk", 'genus')
     elif kind == 'sphere':
@@ -188,7 +188,7 @@ def check_mesh(V, F, kind='disk', max_faces=DEFAULT_MAX_FACES, allow_loose=False
             raise ConformalError(f"mesh is open ({_plural(len(loops), 'boundary loop')}); sphere mode "
                                  "needs a closed mesh: use disk mode, or fill the holes", 'bad_topology')
         if chi != 2:
-            genus = (2 - chi) // 2
+            genus = topology.genus(chi)
             raise ConformalError(f"mesh has genus {genus} (Euler characteristic {chi}); sphere mode needs "
                                  "genus 0: mark seams and use disk mode", 'genus')
     elif kind != 'surface':
