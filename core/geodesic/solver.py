@@ -104,8 +104,11 @@ FINE_ANISO = 1.1      # or where a triangle at the source has a metric anisotrop
 # automatic grid): their error (as k^-STEINER_ORDER) is a floor under the grid's, and at STEINER it held
 # a lifted hemisphere's rim sources at 0.03-0.055 % mean from 512 to 1024 (one rising); at 31 they fall,
 # 0.017-0.019 -> 0.015-0.017 % (docs/geodesic.md, "Thirty-ninth session"). At most FINE_MAX_FACES
-# triangles: about 11M links for the two graphs, within the paths' memory budget
+# triangles: about 11M links for the two graphs, within the paths' memory budget. On a given grid finer
+# than FINE_GIVEN_NODES the points grow as the square root of its size and the window shrinks, its links
+# growing as the points (``fine_seed_paths``)
 FINE_STEINER_GIVEN = 31
+FINE_GIVEN_NODES = 1024
 FINE_BAND = 8.0      # cells (at the node's own mu) inside tau where grid nodes take every Steiner path
 FINE_EDGES = 16.0     # the window reaches at least this many mean 3D edges of the source's triangles
 # Spots (docs/geodesic.md, "Spots"): triangles whose surface cell h / mu exceeds SPOT_CELL times their mean
@@ -181,6 +184,27 @@ def metric_anisotropy(ginv: np.ndarray) -> np.ndarray:
     a, b, c = ginv.T
     half, dev = (a + c) / 2, np.sqrt(((a - c) / 2) ** 2 + b * b)
     return np.sqrt((half + dev) / np.maximum(half - dev, 1e-300 * half))
+
+
+def fine_seed_paths(size: int, given: bool) -> tuple[int, float, int]:
+    """The refined seed's Steiner points per edge, its window's reach in mean 3D edges and its most
+    triangles, ``(k, edges, faces)``, on a chart's grid of ``size`` nodes along the longer side
+    (``given``: the user's). An automatic grid: ``(STEINER, FINE_EDGES, FINE_MAX_FACES)``. A given one:
+    ``FINE_STEINER_GIVEN`` points up to ``FINE_GIVEN_NODES`` nodes, then as the square root of the size
+    (odd: 45 at 2048, 63 at 4096), so that the paths' error (as ``k^-STEINER_ORDER``, carried outward
+    from the window as an offset) keeps falling under the grid's; the window's reach falls as
+    ``k^-1/2`` and its triangles as ``1 / k``, so its graphs' links (about ``k^2`` a triangle) grow as
+    ``k`` only (twice at 4096). Measured, mean % at a given 2048 / 4096 (docs/geodesic.md, "Fortieth
+    session"): a lifted hemisphere's curvature source 0.0266 / 0.0266 at 31 points over 16 edges,
+    0.0161 / 0.0113 with this rule; deepcap's central one 0.0177 / 0.0173 and 0.0175 / 0.0151, where a
+    window shrunk as ``1 / k`` (links kept) gave 0.0172 / 0.0197."""
+    if not given:
+        return STEINER, FINE_EDGES, FINE_MAX_FACES
+    k = FINE_STEINER_GIVEN
+    if size > FINE_GIVEN_NODES:
+        k = 2 * int(np.ceil((FINE_STEINER_GIVEN * np.sqrt(size / FINE_GIVEN_NODES) - 1) / 2)) + 1
+    shrink = np.sqrt(FINE_STEINER_GIVEN / k)
+    return k, FINE_EDGES * shrink, int(FINE_MAX_FACES * shrink * shrink)
 
 
 def metric_excess(aniso: np.ndarray, area: np.ndarray) -> float:
@@ -2365,12 +2389,12 @@ class GeodesicSolver:
         ``mu`` the smallest of theirs), or a triangle at the source has a metric anisotropy
         ``sqrt(l_max / l_min)`` above ``FINE_ANISO``, the grid's isotropic or directional speeds leave a
         deficit near the source that travels outward. There the seed takes shortest paths on the mesh
-        through ``STEINER`` points per edge (``FINE_STEINER_GIVEN`` on a grid the user gives),
-        Richardson-extrapolated (``steiner_distances``), over the triangles within ``FINE_WINDOW``
-        cells (UV) or ``FINE_EDGES`` mean 3D edges (not on a similarity chart) of the source (the
-        connected part holding it, at most ``FINE_MAX_FACES``, the nearest in 3D). They hold up to
-        ``tau``, the 3D distance from the source to the window's cut
-        boundary: no geodesic shorter than that leaves the window. A grid node within ``FINE_BAND`` of
+        through ``STEINER`` points per edge, Richardson-extrapolated (``steiner_distances``), over the
+        triangles within ``FINE_WINDOW`` cells (UV) or ``FINE_EDGES`` mean 3D edges (not on a
+        similarity chart) of the source (the connected part holding it, at most ``FINE_MAX_FACES``, the
+        nearest in 3D); on a grid the user gives, the points, edges and triangles of
+        ``fine_seed_paths``. They hold up to ``tau``, the 3D distance from the source to the window's
+        cut boundary: no geodesic shorter than that leaves the window. A grid node within ``FINE_BAND`` of
         its cells inside ``tau`` takes the shortest path to a point of its triangle's boundary plus the
         straight segment to it in the triangle; deeper nodes the path through a corner; nodes more than
         4 cells beyond ``tau`` inf.
@@ -2393,6 +2417,7 @@ class GeodesicSolver:
             cache = ch.fine_cache = {'bkeys': u[cnt == 1], 'edge': mean_edges(ch.V, Fc), 'aniso': aniso,
                                      'uv_edge': uv_edge}
         nV = len(ch.V)
+        k_fine, reach_edges, max_faces = fine_seed_paths(ch.size, ch.given)
         for i in range(len(S_uv)):
             if i < len(loc):
                 star = np.flatnonzero((ch.F == loc[i]).any(1))
@@ -2418,11 +2443,11 @@ class GeodesicSolver:
             dist_v = np.linalg.norm(ch.uv - S_uv[i], axis=1)
             dist_3 = np.linalg.norm(ch.V - Xs, axis=1)
             # (not on a similarity chart: its straight chart segments are exact, the Steiner paths not)
-            r3 = FINE_EDGES * float(cache['edge'][star].mean()) if ch.ginv is not None else -1.0
+            r3 = reach_edges * float(cache['edge'][star].mean()) if ch.ginv is not None else -1.0
             fsel = np.flatnonzero((dist_v[ch.F] <= wr).any(1) | (dist_3[ch.F] <= r3).any(1))
-            if len(fsel) > FINE_MAX_FACES:              # the nearest triangles (3D) only
+            if len(fsel) > max_faces:                   # the nearest triangles (3D) only
                 dmin = dist_3[ch.F[fsel]].min(1)
-                fsel = np.sort(fsel[np.argsort(dmin, kind='stable')[:FINE_MAX_FACES]])
+                fsel = np.sort(fsel[np.argsort(dmin, kind='stable')[:max_faces]])
             fsel = np.union1d(fsel, star)
             # the connected part of the window that holds the source
             import scipy.sparse as sp
@@ -2459,8 +2484,7 @@ class GeodesicSolver:
             # shortest paths on the window's surface through Steiner points on its edges (exact in
             # the limit; an upper bound, a path on the surface, at any STEINER)
             dv, dS, pts3, graph = steiner_distances(ch.V, Fw, loc[i] if i < len(loc) else None, Xs,
-                                                    star if i >= len(loc) else None,
-                                                    FINE_STEINER_GIVEN if ch.given else STEINER,
+                                                    star if i >= len(loc) else None, k_fine,
                                                     extrapolate=True, graded=True)
             tau = min(tau, float(np.max(dv[sv][np.isfinite(dv[sv])])))
             # the chart's grid nodes in the window: the shortest path to a point on their triangle's
