@@ -1346,6 +1346,7 @@ def test_on_a_given_grid_refined_seeds_take_enough_points_for_the_error_to_fall(
     for j in range(len(sets)):
         assert means[512, j] < 2.5e-4 and means[1024, j] < means[512, j], means
 
+
 def test_a_finer_given_grid_takes_more_steiner_points_in_a_smaller_window(monkeypatch):
     """On a grid the user gives, the refined seed's Steiner paths (a floor under the grid's error, carried
     outward as an offset) take more points per edge as the grid grows past ``FINE_GIVEN_NODES``, while
