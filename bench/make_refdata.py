@@ -14,8 +14,9 @@ the closed meshes ``tests/data/sphere_<name>.npz`` (vertices as float64 of the s
 sphere mode's tests; ``geodesic_ref_suzanne_island.npz`` the largest island of tests/data/suzanne.obj
 cut along its seams, with its ``V`` and ``F``; ``geodesic_ref_scan_patch.npz`` the scan-like disk
 ``tests/meshgen.scan_patch(1500, 3)``, and ``geodesic_ref_lifted_hemisphere.npz`` the lifted hemisphere
-``tests/meshgen.steep_rim(2000, 1, 0.5, 1.0)``, and ``geodesic_ref_bevel_box.npz`` the bevelled cube
-``tests/meshgen.bevel_box(3, 0.2)``, each with its ``V`` and ``F`` (``--closed`` writes these too)."""
+``tests/meshgen.steep_rim(2000, 1, 0.5, 1.0)``, ``geodesic_ref_bevel_box.npz`` the bevelled cube
+``tests/meshgen.bevel_box(3, 0.2)``, and ``geodesic_ref_deepcap.npz`` the deep noisy cap
+``core.surfaces.scan_like('deepcap')``, each with its ``V`` and ``F`` (``--closed`` writes these too)."""
 import argparse
 import os
 import sys
@@ -52,6 +53,9 @@ HEMI_SOURCES = (90, 112, 149)
 # bevel_box(3, 0.2), a coarse CAD-like part (flat faces of two triangles beside thin bevel strips):
 # a corner, a bevel vertex and a face corner (the paths at k = 9 were 0.08-0.12 % off there)
 BEVEL_SOURCES = (0, 100, 200)
+# core.surfaces.scan_like('deepcap'), a deep noisy cap: the far source of bench/geodesic_real.py (a rim
+# vertex; its re-marches' undershoot on given grids, docs/geodesic.md "Forty-first session")
+DEEPCAP_SOURCES = (231,)
 
 
 def suzanne_island():
@@ -126,6 +130,9 @@ def main(argv=None):
               HEMI_SOURCES)
     # a bevelled cube (closed, coarse: few edges between any two points)
     _mesh_ref('bevel_box', 'bevel_box(3, 0.2)', *bevel_box(3, 0.2), BEVEL_SOURCES)
+    # a deep noisy cap (scan-like: random points, Delaunay-triangulated, lifted with noise)
+    from core.surfaces import scan_like
+    _mesh_ref('deepcap', "scan_like('deepcap')", *scan_like('deepcap')[:2], DEEPCAP_SOURCES)
     if args.closed:
         return 0
     return _surfaces(REFS)

@@ -234,6 +234,88 @@ def test_directional_mu_over_several_nodes_does_not_see_node_scale_ripples():
     assert geo.directional_mu(T, valid, face, ginv, 1).tolist() == mu1.tolist()
 
 
+def _speed_toward(G, ginv, x, y, cx, cy):
+    """Exact directional speed ``sqrt(g^T G^-1 g)`` at the points (x, y) of the field ``|p - c|_G``: its
+    gradient is ``G (p - c)``; G and ginv as (a, b, c) of the symmetric 2x2 matrices."""
+    dx, dy = x - cx, y - cy
+    gx, gy = G[0] * dx + G[1] * dy, G[1] * dx + G[2] * dy
+    n = np.hypot(gx, gy)
+    gx, gy = gx / n, gy / n
+    return np.sqrt(ginv[0] * gx * gx + 2 * ginv[1] * gx * gy + ginv[2] * gy * gy)
+
+
+def test_point_source_fit_gives_the_directions_of_an_unfolded_source():
+    """Inside a triangle of constant metric G a front from one unfolded source ``c`` is ``|x - c|_G``,
+    whose ``T^2 - x^T G x`` is affine: the fit over the triangle's nodes finds the directions exactly,
+    where the neighbours' differences see every ripple of the times (a node-scale ripple of 0.02 cells:
+    the differences err by up to 2.5 %, the fit by 2e-6). A triangle where two fronts meet
+    is not fitted (its residual is far above ``FIT_RESIDUAL`` of its times' spread), nor one of fewer
+    than ``FIT_MIN_NODES`` nodes, nor unused nodes."""
+    from core.geodesic.directions import FIT_MIN_NODES, point_source_mu
+    ny, nx, h = 40, 60, 0.05
+    ii, jj = np.mgrid[0:ny, 0:nx]
+    x, y = jj * h, ii * h
+    ginv = np.array([[4.0, 1.0, 2.0], [1.0, 0.2, 0.5], [2.0, -0.5, 1.0], [1.0, 0.0, 1.0]])
+    G = np.array([[c, -b, a] for a, b, c in ginv]) / (ginv[:, 0] * ginv[:, 2] - ginv[:, 1] ** 2)[:, None]
+    face = np.where(jj < 25, 0, np.where(jj < 45, 1, 2))
+    face[:2, :2] = 3                                       # a triangle of 4 nodes
+    src = {0: (-2.0, 0.7), 1: (-1.5, -0.8), 2: (0.4, 3.9), 3: (-1.0, 0.0)}
+    T = np.zeros((ny, nx))
+    want = np.zeros((ny, nx))
+    for t, (cx, cy) in src.items():
+        at = face == t
+        a, b, c = G[t]
+        dx, dy = x[at] - cx, y[at] - cy
+        T[at] = np.sqrt(a * dx * dx + 2 * b * dx * dy + c * dy * dy)
+        want[at] = _speed_toward(G[t], ginv[t], x[at], y[at], cx, cy)
+    # two fronts meeting in triangle 2: the times there are the nearer of two sources
+    at = face == 2
+    a, b, c = G[2]
+    dx, dy = x[at] - 3.0, y[at] - (-2.0)
+    T[at] = np.minimum(T[at], np.sqrt(a * dx * dx + 2 * b * dx * dy + c * dy * dy))
+    valid = np.ones((ny, nx), bool)
+    valid[20, 10] = False
+    ripple = 2e-2 * h * np.cos(np.pi * jj / 2) * np.cos(np.pi * ii / 2)
+    mu, fitted = point_source_mu(T + ripple, valid, face, ginv, h)
+    assert FIT_MIN_NODES > 4
+    assert fitted[(face <= 1) & valid].all() and not fitted[face >= 2].any() and not fitted[20, 10]
+    assert (mu[~fitted] == 1.0).all()
+    on = fitted
+    assert np.abs(mu[on] / want[on] - 1).max() < 1e-4
+    clean, _ = point_source_mu(T, valid, face, ginv, h)
+    assert np.allclose(clean[on], want[on], rtol=1e-9)
+    diff = geo.directional_mu(T + ripple, valid, face, ginv)
+    assert np.abs(diff[on] / want[on] - 1).max() > 1e-2
+    # directional_mu takes the fit where there is one, the differences elsewhere
+    both = geo.directional_mu(T + ripple, valid, face, ginv, 1, h)
+    assert np.array_equal(both[on], mu[on]) and np.array_equal(both[~on], diff[~on])
+
+
+def test_fitted_directions_lift_the_re_marches_undershoot_on_a_given_grid(monkeypatch):
+    """The re-marches' fixed point sat below the exact distances, and further below the finer the grid
+    (the gradient differences' noise: the eikonal solution takes the cheapest of the noisy speeds);
+    with the directions fitted per triangle to an unfolded source it does not. A deep noisy cap's far
+    (rim) source at a given 1024, against exact MMP, measured: mean 0.0349 -> 0.0286 %, signed -0.0268
+    -> -0.0114 %; at 2048 0.0341 -> 0.0226 % and 4096 0.0426 -> 0.0192 % (docs/geodesic.md, "Forty-first
+    session"). Here the fit is switched off by hand for the comparison."""
+    ref = np.load(os.path.join(DATA, 'geodesic_ref_deepcap.npz'))
+    V, F = ref['V'], ref['F'].astype(np.int64)
+    s, D = int(ref['sources'][0]), ref['dist'][0]
+    far = np.linalg.norm(V - V[s], axis=1) > 0.02 * np.linalg.norm(np.ptp(V, axis=0))
+    gs = geo.GeodesicSolver(V, F, grid=1024)
+    err = {}
+    for fit in (True, False):
+        if not fit:
+            monkeypatch.setattr(geo, 'point_source_mu',
+                                lambda T, *a: (np.ones(T.shape), np.zeros(T.shape, bool)))
+        d, rep = gs.distance([s])
+        assert rep['marches'] == 1 + geo.METRIC_PASSES
+        r = (d[far] - D[far]) / D[far]
+        err[fit] = (float(np.abs(r).mean()), float(r.mean()))
+    assert err[True][0] < 0.9 * err[False][0] and err[True][0] < 3.1e-4, err
+    assert -1.5e-4 < err[True][1] and err[False][1] < -2.2e-4, err
+
+
 def test_exact_metric_removes_the_mesh_floor():
     """edgebump 65 against exact MMP: the smooth per-vertex mu ('vertex') stalls at a floor set by the
     mesh (measured centre source 0.040 % at grid 512, 0.033 % at 1024), the exact per-triangle metric
@@ -1562,16 +1644,17 @@ def test_paths_replace_a_capped_grid_only_when_clearly_better(monkeypatch):
 def test_a_map_far_from_conformal_goes_to_the_paths_with_an_honest_estimate(bump65):
     """A given ``uv`` far from conformal on its triangles (bump's area map stretched 1.2x along u and
     shrunk along v: metric anisotropy 1.44 everywhere) is a metric the grid's directional-speed
-    re-marches do not follow: 0.17-0.25 % mean at grids 512-1024 (growing with the grid) where the
-    conformal map gives 0.005 %. With a forced grid the metric term puts the estimate above the
-    target with a warning that names the map; the automatic choice answers the chart by surface paths
-    (which do not use the map), within the target. The conformal map itself stays on the grid."""
+    re-marches follow only in part: 0.091 / 0.092 % mean at grids 512 / 1024 (0.126 / 0.183 %, growing
+    with the grid, before the directions were fitted per triangle) where the conformal map gives
+    0.005 %. With a forced grid the metric term puts the estimate above the target with a warning
+    that names the map; the automatic choice answers the chart by surface paths (which do not use the
+    map), within the target. The conformal map itself stays on the grid."""
     V, F, uv, src, D = bump65
     s, Dk = int(src[1]), D[1]
     suv = uv * np.array([1.2, 1 / 1.2])
     d, rep = geo.geodesic_distance(V, F, [s], uv=suv, grid=512)
     mean, _ = rel_errors(V, d, Dk, s)
-    assert mean > geo.ERROR_TARGET and rep['error_estimate'] > max(geo.ERROR_TARGET, 0.5 * mean)
+    assert mean > 0.5 * geo.ERROR_TARGET and rep['error_estimate'] > max(geo.ERROR_TARGET, mean)
     assert rep['warnings'] and 'far from conformal' in rep['warnings'][0]
     gs = geo.GeodesicSolver(V, F, uv=suv)
     assert gs.charts[0].excess == pytest.approx(1.2 ** 2 - 1, rel=1e-3)

@@ -57,6 +57,7 @@ import numpy as np
 from ..errors import ConformalError
 from ..mesh.geometry import cross, edge_graph, face_areas
 from ..mesh.measures import signed_uv_areas, vertex_mu
+from .directions import point_source_mu
 from .planar import plane_coordinates, planar_paths
 from ..atlas.unfold import unfold_flat_disk
 from .paths import (PATH_BUDGET, PATH_ERROR_9, PATH_K, PATH_K_MAX, STEINER, STEINER_ORDER, SteinerGraph,
@@ -214,7 +215,7 @@ def metric_excess(aniso: np.ndarray, area: np.ndarray) -> float:
     return float((area * (np.minimum(aniso, ANISO_CAP) - 1.0)).sum() / area.sum())
 
 
-def directional_mu(T, valid, face, ginv, step=1):
+def directional_mu(T, valid, face, ginv, step=1, h=None):
     """The speed (ny, nx) that makes the isotropic eikonal ``|grad T| = 1 / mu`` agree with the
     anisotropic one ``grad T^T G^-1 grad T = 1`` for the gradient direction ``g`` of a travel-time
     field ``T`` (ny, nx): ``mu = sqrt(g^T G^-1 g)``, ``G^-1`` (m,3) per triangle (``face_metric_inverse``)
@@ -226,14 +227,22 @@ def directional_mu(T, valid, face, ginv, step=1):
     elsewhere the one-node gradient is used). The re-marches are a fixed-point iteration whose gain on a
     direction error grows as its wavelength shrinks (measured: on a fine grid the passes diverge on
     anisotropic triangles); a difference over ``step`` nodes keeps the directions at the resolution of
-    a coarser grid (``DIRECTION_NODES``), where the passes settle."""
+    a coarser grid (``DIRECTION_NODES``), where the passes settle.
+
+    ``h`` (the grid spacing, UV units): where a triangle's times fit one unfolded point source
+    (``core.geodesic.directions.point_source_mu``), its nodes take the fit's directions instead of the
+    differences (the differences' noise left the passes' fixed point below the true times, more so
+    the finer the grid: docs/geodesic.md, "Forty-first session")."""
     f = np.where(face >= 0, face, 0)
     a, b, cc = ginv[f, 0], ginv[f, 1], ginv[f, 2]          # each node's triangle's G^-1, once
-    mu1 = _directional_mu(T, valid, face, (a, b, cc), 1)
-    if step <= 1:
-        return mu1
-    mu = _directional_mu(T, valid, face, (a, b, cc), int(step), strict=True)
-    return np.where(np.isfinite(mu), mu, mu1)
+    mu = _directional_mu(T, valid, face, (a, b, cc), 1)
+    if step > 1:
+        wide = _directional_mu(T, valid, face, (a, b, cc), int(step), strict=True)
+        mu = np.where(np.isfinite(wide), wide, mu)
+    if h is not None:
+        fit, fitted = point_source_mu(T, valid, face, ginv, h)
+        mu = np.where(fitted, fit, mu)
+    return mu
 
 
 def _directional_mu(T, valid, face, node, s, strict=False):
@@ -2337,7 +2346,7 @@ class GeodesicSolver:
                 # march again with the exact per-triangle metric, for the gradient direction of the
                 # previous pass (docs/geodesic.md, "Exact metric")
                 sp_ = directional_mu(np.where(march_on, Tg, np.inf), march_on, G.face, ch.ginv,
-                                     max(1, max(G.shape) // DIRECTION_NODES))
+                                     max(1, max(G.shape) // DIRECTION_NODES), G.h)
                 phi2 = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * sp_, h_far)
                 phi2 = np.minimum(phi2, h_far)
                 phi2 = np.where(seed, np.minimum(phi2, -1e-9 * G.h), np.maximum(phi2, 1e-9 * G.h))
