@@ -49,12 +49,17 @@ def point_source_mu(T, valid, face, ginv, h):
     det = np.where(good, det, 1.0)
     G = np.stack([c / det, -b / det, a / det], 1) * (h * h)    # G in node units, (m,3)
     chunks = [use[i:i + CHUNK] for i in range(0, len(use), CHUNK)]
+
+    def nodes(ch):
+        """Triangle (k,) and column, row (k,) as floats of the nodes ``ch``."""
+        row, col = np.divmod(ch, nx)
+        return fr[ch], col.astype(np.float64), row.astype(np.float64)
+    first = nodes(chunks[0]) if len(chunks) == 1 else None     # one chunk: its nodes read once
     # the triangles' node counts and centres (node units), then the sums of the centred fit
     cnt = np.zeros(m)
     centre = np.zeros((m, 2))
     for ch in chunks:
-        t = fr[ch]
-        row, col = np.divmod(ch, nx)
+        t, col, row = first or nodes(ch)
         cnt += np.bincount(t, minlength=m)
         centre[:, 0] += np.bincount(t, col, m)
         centre[:, 1] += np.bincount(t, row, m)
@@ -63,10 +68,11 @@ def point_source_mu(T, valid, face, ginv, h):
 
     def pieces(ch):
         """Triangle (k,), centred position x, y (k,) each, time (k,), G (k,3) of the nodes ``ch``."""
-        t = fr[ch]
-        row, col = np.divmod(ch, nx)
-        return t, col - centre[t, 0], row - centre[t, 1], Tr[ch], G[t]
-    one = pieces(chunks[0]) if len(chunks) == 1 else None     # one chunk: gathered once
+        t, col, row = first or nodes(ch)
+        col -= centre[t, 0]
+        row -= centre[t, 1]
+        return t, col, row, Tr[ch], G[t]
+    one = pieces(chunks[0]) if first else None                 # ... and gathered once
     S = np.zeros((8, m))              # xx, xy, yy, xz, yz, z, T, T^2
     for ch in chunks:
         t, x, y, Tv, g = one or pieces(ch)
