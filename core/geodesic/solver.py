@@ -47,6 +47,9 @@ A query (``GeodesicSolver.distance``):
    previous march the anisotropic eikonal equals the isotropic one with speed
    ``sqrt(g^T G^-1 g)`` (``directional_mu``). This removes the mesh's floor (the smooth per-vertex
    ``mu`` against the per-triangle, slightly anisotropic metric): the error then falls with the grid.
+   On a grid the user gives, the direction ``g`` is fitted per triangle to one unfolded source where
+   its nodes' times allow (``core.geodesic.directions.point_source_mu``); elsewhere it is taken from
+   the neighbours' differences.
 6. Sample the travel time back to the vertices bilinearly, then clamp each vertex between two exact
    bounds: the 3D distance to the nearest source (below) and the shortest edge path (Dijkstra, above).
 """
@@ -2345,8 +2348,11 @@ class GeodesicSolver:
             for _ in range(passes):
                 # march again with the exact per-triangle metric, for the gradient direction of the
                 # previous pass (docs/geodesic.md, "Exact metric")
+                # on a grid the user gives, each triangle's directions are fitted to one unfolded
+                # source (automatic grids meet their target without: the fit moved their means by
+                # 0.002 % at most and cost 14-19 % of a query, docs/geodesic.md)
                 sp_ = directional_mu(np.where(march_on, Tg, np.inf), march_on, G.face, ch.ginv,
-                                     max(1, max(G.shape) // DIRECTION_NODES), G.h)
+                                     max(1, max(G.shape) // DIRECTION_NODES), G.h if ch.given else None)
                 phi2 = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * sp_, h_far)
                 phi2 = np.minimum(phi2, h_far)
                 phi2 = np.where(seed, np.minimum(phi2, -1e-9 * G.h), np.maximum(phi2, 1e-9 * G.h))
