@@ -276,18 +276,18 @@ def test_point_source_fit_gives_the_directions_of_an_unfolded_source():
     valid = np.ones((ny, nx), bool)
     valid[20, 10] = False
     ripple = 2e-2 * h * np.cos(np.pi * jj / 2) * np.cos(np.pi * ii / 2)
-    mu, fitted = point_source_mu(T + ripple, valid, face, ginv, h)
+    mu, fitted = point_source_mu(T + ripple, valid, face, ginv, G, h)
     assert FIT_MIN_NODES > 4
     assert fitted[(face <= 1) & valid].all() and not fitted[face >= 2].any() and not fitted[20, 10]
     assert (mu[~fitted] == 1.0).all()
     on = fitted
     assert np.abs(mu[on] / want[on] - 1).max() < 1e-4
-    clean, _ = point_source_mu(T, valid, face, ginv, h)
+    clean, _ = point_source_mu(T, valid, face, ginv, G, h)
     assert np.allclose(clean[on], want[on], rtol=1e-9)
     diff = geo.directional_mu(T + ripple, valid, face, ginv)
     assert np.abs(diff[on] / want[on] - 1).max() > 1e-2
     # directional_mu takes the fit where there is one, the differences elsewhere
-    both = geo.directional_mu(T + ripple, valid, face, ginv, 1, h)
+    both = geo.directional_mu(T + ripple, valid, face, ginv, 1, (G, h))
     assert np.array_equal(both[on], mu[on]) and np.array_equal(both[~on], diff[~on])
 
 

@@ -26,15 +26,16 @@ FIT_RESIDUAL = 0.05    # ... and the fit's RMS residual is at most this share of
 CHUNK = 1 << 21        # nodes summed at a time (the sums are per triangle; memory stays flat)
 
 
-def point_source_mu(T, valid, face, ginv, h):
+def point_source_mu(T, valid, face, ginv, metric, h):
     """The directional speed ``sqrt(g^T G^-1 g)`` (``directional_mu``) for the gradient direction
     ``g`` of the point-source fit of ``T`` in each node's triangle (see the module's docstring).
 
     T: (ny, nx) travel times, surface units (inf or NaN where unknown). valid: (ny, nx) bool, the
-    nodes that may be used. face: (ny, nx) int, each node's triangle (-1 outside). ginv: (m,3) the
-    ``(a, b, c)`` of each triangle's ``G^-1`` (UV units squared per surface unit squared). h: the grid
-    spacing, UV units. Returns ``(mu (ny, nx), fitted (ny, nx) bool)``: ``mu`` is 1 where ``fitted``
-    is False (the caller's differences go there)."""
+    nodes that may be used. face: (ny, nx) int, each node's triangle (-1 outside). ginv, metric: (m,3)
+    the ``(a, b, c)`` of each triangle's ``G^-1`` (UV units squared per surface unit squared) and of
+    ``G`` (its inverse: the chart's ``seed_metric``). h: the grid spacing, UV units. Returns ``(mu
+    (ny, nx), fitted (ny, nx) bool)``: ``mu`` is 1 where ``fitted`` is False (the caller's
+    differences go there)."""
     ny, nx = T.shape
     m = len(ginv)
     Tr, fr = T.ravel(), face.ravel()
@@ -44,10 +45,8 @@ def point_source_mu(T, valid, face, ginv, h):
     if not len(use):
         return mu.reshape(T.shape), fitted.reshape(T.shape)
     a, b, c = ginv[:, 0], ginv[:, 1], ginv[:, 2]
-    det = a * c - b * b
-    good = np.isfinite(det) & (det > 0)
-    det = np.where(good, det, 1.0)
-    G = np.stack([c / det, -b / det, a / det], 1) * (h * h)    # G in node units, (m,3)
+    good = np.isfinite(metric).all(1) & np.isfinite(ginv).all(1)
+    G = np.where(good[:, None], metric, 0.0) * (h * h)        # G in node units, (m,3)
     chunks = [use[i:i + CHUNK] for i in range(0, len(use), CHUNK)]
 
     def nodes(ch):

@@ -218,7 +218,7 @@ def metric_excess(aniso: np.ndarray, area: np.ndarray) -> float:
     return float((area * (np.minimum(aniso, ANISO_CAP) - 1.0)).sum() / area.sum())
 
 
-def directional_mu(T, valid, face, ginv, step=1, h=None):
+def directional_mu(T, valid, face, ginv, step=1, fit=None):
     """The speed (ny, nx) that makes the isotropic eikonal ``|grad T| = 1 / mu`` agree with the
     anisotropic one ``grad T^T G^-1 grad T = 1`` for the gradient direction ``g`` of a travel-time
     field ``T`` (ny, nx): ``mu = sqrt(g^T G^-1 g)``, ``G^-1`` (m,3) per triangle (``face_metric_inverse``)
@@ -232,19 +232,20 @@ def directional_mu(T, valid, face, ginv, step=1, h=None):
     anisotropic triangles); a difference over ``step`` nodes keeps the directions at the resolution of
     a coarser grid (``DIRECTION_NODES``), where the passes settle.
 
-    ``h`` (the grid spacing, UV units): where a triangle's times fit one unfolded point source
-    (``core.geodesic.directions.point_source_mu``), its nodes take the fit's directions instead of the
-    differences (the differences' noise left the passes' fixed point below the true times, more so
-    the finer the grid: docs/geodesic.md, "Forty-first session")."""
+    ``fit``: ``(metric, h)``, each triangle's ``G`` (m,3) and the grid spacing (UV units): where a
+    triangle's times fit one unfolded point source (``core.geodesic.directions.point_source_mu``), its
+    nodes take the fit's directions instead of the differences (the differences' noise left the
+    passes' fixed point below the true times, more so the finer the grid: docs/geodesic.md,
+    "Forty-first session")."""
     f = np.where(face >= 0, face, 0)
     a, b, cc = ginv[f, 0], ginv[f, 1], ginv[f, 2]          # each node's triangle's G^-1, once
     mu = _directional_mu(T, valid, face, (a, b, cc), 1)
     if step > 1:
         wide = _directional_mu(T, valid, face, (a, b, cc), int(step), strict=True)
         mu = np.where(np.isfinite(wide), wide, mu)
-    if h is not None:
-        fit, fitted = point_source_mu(T, valid, face, ginv, h)
-        mu = np.where(fitted, fit, mu)
+    if fit is not None:
+        fitted_mu, fitted = point_source_mu(T, valid, face, ginv, *fit)
+        mu = np.where(fitted, fitted_mu, mu)
     return mu
 
 
@@ -2352,7 +2353,8 @@ class GeodesicSolver:
                 # source (automatic grids meet their target without: the fit moved their means by
                 # 0.002 % at most and cost 14-19 % of a query, docs/geodesic.md)
                 sp_ = directional_mu(np.where(march_on, Tg, np.inf), march_on, G.face, ch.ginv,
-                                     max(1, max(G.shape) // DIRECTION_NODES), G.h if ch.given else None)
+                                     max(1, max(G.shape) // DIRECTION_NODES),
+                                     (ch.seed_metric[1], G.h) if ch.given else None)
                 phi2 = np.where(np.isfinite(Tloc) & valid, (Tloc - tau) * sp_, h_far)
                 phi2 = np.minimum(phi2, h_far)
                 phi2 = np.where(seed, np.minimum(phi2, -1e-9 * G.h), np.maximum(phi2, 1e-9 * G.h))
