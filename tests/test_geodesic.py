@@ -1429,15 +1429,18 @@ def test_on_a_given_grid_refined_seeds_take_enough_points_for_the_error_to_fall(
         assert means[512, j] < 2.5e-4 and means[1024, j] < means[512, j], means
 
 
-def test_a_finer_given_grid_takes_more_steiner_points_in_a_smaller_window(monkeypatch):
+def test_a_finer_given_grid_takes_more_steiner_points_over_the_same_window(monkeypatch):
     """On a grid the user gives, the refined seed's Steiner paths (a floor under the grid's error, carried
-    outward as an offset) take more points per edge as the grid grows past ``FINE_GIVEN_NODES``, while
-    the window shrinks so that its graphs' links (about ``k^2`` a triangle) grow as ``k`` only. At 31
-    points a lifted hemisphere's curvature source stayed at 0.027 % from 1024 to 4096; with the rule
-    0.016 / 0.011 % at 2048 / 4096 (docs/geodesic.md, "Fortieth session"). Automatic grids keep
-    ``STEINER``. The rule's effect is checked at 1024 with ``FINE_GIVEN_NODES`` at 512 (45 points over
-    13 edges): the lifted hemisphere's three rim sources 0.0173 / 0.0190 / 0.0167 -> 0.0131 / 0.0139 /
-    0.0131 % mean (measured; the test takes the second), where 31 points over 16 edges are the floor."""
+    outward as an offset) take more points per edge as the grid grows past ``FINE_GIVEN_NODES``, over
+    the same window (16 mean edges, at most 3000 triangles). At 31 points a lifted hemisphere's
+    curvature source stayed at 0.027 % from 1024 to 4096; with more points 0.014 / 0.0097 % at 2048 /
+    4096 (docs/geodesic.md, "Forty-second session"). Automatic grids keep ``STEINER``. The rule's
+    effect is checked at 1024 with ``FINE_GIVEN_NODES`` lowered: edgebump's peak with 63 points (as at
+    4096) 0.0024 -> 0.0021 % mean (0.0114 % in the former rule's window, whose reach fell as
+    ``k^-1/2``: the grid then took over inside the bump, and the peak rose 0.0033 -> 0.0099 % from a
+    given 2048 to 4096); the lifted hemisphere's three rim sources with 45 points 0.0159 / 0.0167 /
+    0.0146 -> 0.0104 / 0.0105 / 0.0098 % (the test takes the second; 0.0131 / 0.0139 / 0.0131 % in
+    the former rule's window)."""
     assert geo.fine_seed_paths(4096, False) == (geo.STEINER, geo.FINE_EDGES, geo.FINE_MAX_FACES)
     base = geo.fine_seed_paths(geo.FINE_GIVEN_NODES, True)
     assert base == (geo.FINE_STEINER_GIVEN, geo.FINE_EDGES, geo.FINE_MAX_FACES)
@@ -1446,22 +1449,31 @@ def test_a_finer_given_grid_takes_more_steiner_points_in_a_smaller_window(monkey
     for size in (1100, 1536, 2048, 3000, 4096):
         k, edges, faces = geo.fine_seed_paths(size, True)
         assert k % 2 == 1 and k > last and k >= geo.FINE_STEINER_GIVEN * np.sqrt(size / geo.FINE_GIVEN_NODES)
-        # the window's reach falls as k^-1/2, its triangles as 1 / k: the links (k^2 a triangle) as k
-        assert np.isclose(k * edges ** 2, base[0] * base[1] ** 2)
-        assert k * faces <= base[0] * base[2] and faces > 0.99 * base[2] * base[0] / k
+        assert (edges, faces) == base[1:]
         last = k
+    V, F = make_surface('edgebump', 65)
+    ref = np.load(os.path.join(DATA, 'geodesic_ref_edgebump_65.npz'))
+    s, D = int(ref['sources'][3]), ref['dist'][3].astype(np.float64)
+    gs = geo.GeodesicSolver(V, F, grid=1024)
+    err, plain = {}, geo.FINE_GIVEN_NODES
+    for nodes in (plain, 256):
+        monkeypatch.setattr(geo, 'FINE_GIVEN_NODES', nodes)
+        d, rep = gs.distance([s])
+        assert rep['refined_sources'] == 1
+        err[nodes] = rel_errors(V, d, D, s)[0]
+    assert err[256] < err[plain] and err[256] < 3e-5, err
     ref = np.load(os.path.join(DATA, 'geodesic_ref_lifted_hemisphere.npz'))
     V, F = ref['V'], ref['F'].astype(np.int64)
     s, D = int(ref['sources'][1]), ref['dist'][1]
     far = np.linalg.norm(V - V[s], axis=1) > 0.02 * np.linalg.norm(np.ptp(V, axis=0))
     gs = geo.GeodesicSolver(V, F, grid=1024)
-    err, plain = {}, geo.FINE_GIVEN_NODES
+    err = {}
     for nodes in (plain, 512):
         monkeypatch.setattr(geo, 'FINE_GIVEN_NODES', nodes)
         d, rep = gs.distance([s])
         assert rep['refined_sources'] == 1
         err[nodes] = float(np.mean(np.abs(d[far] - D[far]) / D[far]))
-    assert err[512] < 0.85 * err[plain] and err[512] < 1.6e-4, err
+    assert err[512] < 0.75 * err[plain] and err[512] < 1.2e-4, err
 
 
 def test_a_mesh_of_needles_takes_intrinsic_surface_paths_by_default():

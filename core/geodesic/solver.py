@@ -196,19 +196,18 @@ def fine_seed_paths(size: int, given: bool) -> tuple[int, float, int]:
     (``given``: the user's). An automatic grid: ``(STEINER, FINE_EDGES, FINE_MAX_FACES)``. A given one:
     ``FINE_STEINER_GIVEN`` points up to ``FINE_GIVEN_NODES`` nodes, then as the square root of the size
     (odd: 45 at 2048, 63 at 4096), so that the paths' error (as ``k^-STEINER_ORDER``, carried outward
-    from the window as an offset) keeps falling under the grid's; the window's reach falls as
-    ``k^-1/2`` and its triangles as ``1 / k``, so its graphs' links (about ``k^2`` a triangle) grow as
-    ``k`` only (twice at 4096). Measured, mean % at a given 2048 / 4096 (docs/geodesic.md, "Fortieth
-    session"): a lifted hemisphere's curvature source 0.0266 / 0.0266 at 31 points over 16 edges,
-    0.0161 / 0.0113 with this rule; deepcap's central one 0.0177 / 0.0173 and 0.0175 / 0.0151, where a
-    window shrunk as ``1 / k`` (links kept) gave 0.0172 / 0.0197."""
+    from the window as an offset) keeps falling under the grid's, over the same window at every size
+    (``FINE_EDGES``, ``FINE_MAX_FACES``). Measured, mean % at a given 2048 / 4096 (docs/geodesic.md,
+    "Forty-second session"): edgebump's curvature source 0.0014 / 0.0009 % with this window, 0.0033 /
+    0.0099 % when its reach fell as ``k^-1/2`` (the grid then took over inside the bump, where its
+    re-marches undershoot); a lifted hemisphere's curvature source 0.0141 / 0.0097 against 0.0161 /
+    0.0113. At 4096 the grid's own arrays dominate the memory either way."""
     if not given:
         return STEINER, FINE_EDGES, FINE_MAX_FACES
     k = FINE_STEINER_GIVEN
     if size > FINE_GIVEN_NODES:
         k = 2 * int(np.ceil((FINE_STEINER_GIVEN * np.sqrt(size / FINE_GIVEN_NODES) - 1) / 2)) + 1
-    shrink = np.sqrt(FINE_STEINER_GIVEN / k)
-    return k, FINE_EDGES * shrink, int(FINE_MAX_FACES * shrink * shrink)
+    return k, FINE_EDGES, FINE_MAX_FACES
 
 
 def metric_excess(aniso: np.ndarray, area: np.ndarray) -> float:
