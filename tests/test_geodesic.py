@@ -148,6 +148,25 @@ def test_barycentric_point_sources(flat, bump65):
     assert np.allclose(dp, dv, atol=1e-12)
 
 
+def test_a_surface_point_source_takes_the_refined_seed():
+    """A surface point at edgebump 65's peak, on the automatic grid: the refined seed's window searched
+    the point's triangle by its row in the whole chart, not in the window (an IndexError, or another
+    triangle where the row fell inside the window). Now the point at a vertex, given in each triangle
+    around it, answers as that vertex does: against exact MMP 0.0055-0.0072 % mean (measured), the
+    vertex 0.0066 %."""
+    V, F = make_surface('edgebump', 65)
+    ref = np.load(os.path.join(DATA, 'geodesic_ref_edgebump_65.npz'))
+    s, D = int(ref['sources'][3]), ref['dist'][3].astype(np.float64)
+    gs = geo.GeodesicSolver(V, F, method='grid')
+    dv, rv = gs.distance([s])
+    assert rv['refined_sources'] == 1
+    for f in np.nonzero((F == s).any(1))[0][:3]:
+        dp, rp = gs.distance(points=([f], [(F[f] == s).astype(float)]))
+        assert rp['refined_sources'] == 1
+        mean, mx = rel_errors(V, dp, D, s)
+        assert mean < 1e-4 and mean < 1.3 * rel_errors(V, dv, D, s)[0], (f, mean)
+
+
 def test_units_follow_the_mesh_not_the_uv_scale(bump65):
     V, F, uv, sources, D = bump65
     s = int(sources[0])

@@ -2499,9 +2499,10 @@ class GeodesicSolver:
                 continue
             # shortest paths on the window's surface through Steiner points on its edges (exact in
             # the limit; an upper bound, a path on the surface, at any STEINER)
+            # (a point source's triangle by its row in the window: ``Fw`` is ``ch.F[fsel]``, ``fsel`` sorted)
             dv, dS, pts3, graph = steiner_distances(ch.V, Fw, loc[i] if i < len(loc) else None, Xs,
-                                                    star if i >= len(loc) else None, k_fine,
-                                                    extrapolate=True, graded=True)
+                                                    np.searchsorted(fsel, star) if i >= len(loc) else None,
+                                                    k_fine, extrapolate=True, graded=True)
             tau = min(tau, float(np.max(dv[sv][np.isfinite(dv[sv])])))
             # the chart's grid nodes in the window: the shortest path to a point on their triangle's
             # boundary, then the straight segment inside the triangle
