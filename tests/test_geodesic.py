@@ -316,7 +316,10 @@ def test_fitted_directions_lift_the_re_marches_undershoot_on_a_given_grid(monkey
     with the directions fitted per triangle to an unfolded source it does not. A deep noisy cap's far
     (rim) source at a given 1024, against exact MMP, measured: mean 0.0349 -> 0.0286 %, signed -0.0268
     -> -0.0114 %; at 2048 0.0341 -> 0.0226 % and 4096 0.0426 -> 0.0192 % (docs/geodesic.md, "Forty-first
-    session"). Here the fit is switched off by hand for the comparison."""
+    session"). Here the fit is switched off by hand for the comparison, with the plain seed this was
+    measured with (``FINE_GIVEN_ALL`` off: the refined seed, now taken by every source on a given grid,
+    brings both to about 0.018 % here at 1024)."""
+    monkeypatch.setattr(geo, 'FINE_GIVEN_ALL', False)
     ref = np.load(os.path.join(DATA, 'geodesic_ref_deepcap.npz'))
     V, F = ref['V'], ref['F'].astype(np.int64)
     s, D = int(ref['sources'][0]), ref['dist'][0]
@@ -337,8 +340,10 @@ def test_fitted_directions_lift_the_re_marches_undershoot_on_a_given_grid(monkey
 
 def test_exact_metric_removes_the_mesh_floor():
     """edgebump 65 against exact MMP: the smooth per-vertex mu ('vertex') stalls at a floor set by the
-    mesh (measured centre source 0.040 % at grid 512, 0.033 % at 1024), the exact per-triangle metric
-    (the default) keeps falling with the grid (0.024 %, 0.0098 %) and its largest error shrinks."""
+    mesh (measured centre source 0.040 % at grid 512, 0.033 % at 1024; 0.030 % at 1024 with the refined
+    seed every source takes on a given grid), the exact per-triangle metric (the default) keeps falling
+    with the grid (0.024 %, 0.0098 % with the plain seed; 0.0083 %, 0.0051 % refined) and its largest
+    error shrinks."""
     V, F = make_surface('edgebump', 65)
     ref = np.load(os.path.join(DATA, 'geodesic_ref_edgebump_65.npz'))
     k = 1
@@ -349,7 +354,7 @@ def test_exact_metric_removes_the_mesh_floor():
         d, rep = geo.geodesic_distance(V, F, [s], uv=uv, grid=g, mu_mode=mode)
         err[mode, g] = rel_errors(V, d, D, s)
         assert rep['metric_passes'] == (geo.METRIC_PASSES if mode == 'metric' else 0)
-    assert err['metric', 1024][0] < 0.6 * err['metric', 512][0], err
+    assert err['metric', 1024][0] < 0.7 * err['metric', 512][0], err
     assert err['metric', 1024][0] < 0.5 * err['vertex', 1024][0], err
     assert err['metric', 1024][1] < 0.8 * err['vertex', 1024][1], err
     assert err['metric', 1024][0] < 2e-4 and err['metric', 1024][1] < 1e-2, err
@@ -485,13 +490,14 @@ def _spot_head_cut(tmp_path):
     return V[used], new[keep]
 
 
-def test_a_pocket_no_march_reaches_takes_no_other_source_s_seed(tmp_path):
+def test_a_pocket_no_march_reaches_takes_no_other_source_s_seed(tmp_path, monkeypatch):
     """On spot's head cut at grid 1024 a few nodes by the boundary lie in a pocket that no march
     reaches. Alone, each source leaves its vertices to be filled from their neighbours. In a set, a
     refined source's seed (its own march, whose level covers the pocket) gave them its times instead,
     whatever the other sources: +40 % at a boundary vertex. Now the set's distances are the smallest of
-    its sources' own."""
+    its sources' own (one source refined, one plain: ``FINE_GIVEN_ALL`` off, as on an automatic grid)."""
     V, F = _spot_head_cut(tmp_path)
+    monkeypatch.setattr(geo, 'FINE_GIVEN_ALL', False)
     solver = geo.GeodesicSolver(V, F, grid=1024, refine=False)     # on the head cut's own triangles
     (d3, r3), (d118, r118) = solver.distance([3]), solver.distance([118])
     assert (r3['refined_sources'], r118['refined_sources']) == (1, 0)
@@ -503,6 +509,29 @@ def test_a_pocket_no_march_reaches_takes_no_other_source_s_seed(tmp_path):
     assert apart.max() < 0.01, apart.max()
 
 
+def test_a_given_grid_refines_every_source_s_seed(tmp_path, monkeypatch):
+    """On a grid the user gives, a source whose cells are fine enough for the plain seed takes the
+    refined one too: the plain seed's deficit is an offset that does not fall with the grid. spot's head
+    cut from its boundary vertex farthest from the middle, against exact MMP: 0.0231 -> 0.0122 % mean
+    at a given 512, 0.0098 -> 0.0074 % at 1024 (measured; a voxel figure's far source 0.031 / 0.042 ->
+    0.015 / 0.020 % at 2048 / 4096, docs/geodesic.md, "Forty-second session"). The test takes 512,
+    against surface paths at 31 points per edge (0.005 % from exact MMP on this mesh)."""
+    V, F = _spot_head_cut(tmp_path)
+    bnd = np.unique(np.concatenate(topology.boundary_loops(F, len(V))))
+    mid = np.argmin(np.linalg.norm(V - V.mean(0), axis=1))
+    s = int(bnd[np.argmax(np.linalg.norm(V[bnd] - V[mid], axis=1))])
+    D = geo.GeodesicSolver(V, F, method='paths', steiner_points=31).distance([s])[0]    # 0.005 % from MMP
+    far = np.linalg.norm(V - V[s], axis=1) > 0.02 * np.linalg.norm(np.ptp(V, axis=0))
+    gs = geo.GeodesicSolver(V, F, grid=512)
+    err = {}
+    for every in (False, True):
+        monkeypatch.setattr(geo, 'FINE_GIVEN_ALL', every)
+        d, rep = gs.distance([s])
+        assert rep['refined_sources'] == int(every)
+        err[every] = float(np.mean(np.abs(d[far] - D[far]) / D[far]))
+    assert err[True] < 0.7 * err[False] and err[True] < 1.5e-4, err
+
+
 def test_a_forced_grid_on_a_map_far_from_conformal_marches_on_finer_triangles(tmp_path, capsys):
     """spot's head cut at a forced grid: its map is far from conformal on its triangles (metric_excess
     0.13), a metric the re-marches do not follow, so the error stayed at about 0.1 % whatever the grid
@@ -510,8 +539,10 @@ def test_a_forced_grid_on_a_map_far_from_conformal_marches_on_finer_triangles(tm
     now marches on the same surface subdivided twice at its edge midpoints (excess 0.03), and the error
     falls with the grid (0.069 / 0.029 / 0.014 / 0.009 %). Against surface paths at 31 points per
     edge (0.005 % from exact MMP on this mesh), from its boundary vertex farthest from the middle:
-    0.031 % at 512 and 0.014 % at 1024 (0.088 % and 0.075 % on its own triangles); the distances come
-    back per input vertex. A surface point is answered in the child triangle that holds it."""
+    0.031 % at 512 and 0.014 % at 1024 (0.088 % and 0.075 % on its own triangles); since every source
+    on a given grid takes the refined seed, 0.013 % and 0.009 % (0.036 % at 1024 on its own
+    triangles); the distances come back per input vertex. A surface point is answered in the child
+    triangle that holds it."""
     V, F = _spot_head_cut(tmp_path)
     ref = geo.GeodesicSolver(V, F, method='paths', steiner_points=31)
     bnd = np.unique(np.concatenate(topology.boundary_loops(F, len(V))))
@@ -529,7 +560,7 @@ def test_a_forced_grid_on_a_map_far_from_conformal_marches_on_finer_triangles(tm
     e1024, _ = err(geo.GeodesicSolver(V, F, grid=1024))
     coarse, rep = err(geo.GeodesicSolver(V, F, grid=1024, refine=False))
     assert 'refined' not in rep
-    assert e1024 < 0.5 * e512 and e1024 < 0.5 * coarse and e1024 < 5e-4, (e512, e1024, coarse)
+    assert e1024 < 0.8 * e512 and e1024 < 0.5 * coarse and e1024 < 2e-4, (e512, e1024, coarse)
     # a surface point: the same distances as from the vertex it sits on (its corner, barycentric 1)
     f = int(np.flatnonzero((F == src).any(1))[0])
     b = (F[f] == src).astype(float)
@@ -674,12 +705,12 @@ def test_refined_seed_at_a_strongly_curved_coarse_source():
     mean, mx = rel_errors(V, d, D, s)
     assert mean < 1e-3 and mx < 1e-2, (mean, mx)
     assert (d >= E - 1e-9).all()
-    old = geo.FINE_NODES, geo.FINE_ANISO
+    old = geo.FINE_NODES, geo.FINE_ANISO, geo.FINE_GIVEN_ALL
     try:
-        geo.FINE_NODES, geo.FINE_ANISO = 0.0, np.inf
+        geo.FINE_NODES, geo.FINE_ANISO, geo.FINE_GIVEN_ALL = 0.0, np.inf, False
         d0, rep0 = gs.distance([s], clamp=False)
     finally:
-        geo.FINE_NODES, geo.FINE_ANISO = old
+        geo.FINE_NODES, geo.FINE_ANISO, geo.FINE_GIVEN_ALL = old
     assert rep0['refined_sources'] == 0
     assert rel_errors(V, d0, D, s)[0] > 3 * mean
 
@@ -720,6 +751,7 @@ def test_the_seed_does_not_flip_to_a_worse_one_on_a_finer_grid(monkeypatch):
         errs.append(rel_errors(V, d, D, s))
     assert errs[1][0] < 0.8 * errs[0][0] and errs[0][0] < 1.5e-4, errs
     monkeypatch.setattr(geo, 'SEED_NODES', 10 ** 9)             # the choice read at the grid itself
+    monkeypatch.setattr(geo, 'FINE_GIVEN_ALL', False)  # a given grid otherwise refines every source
     d, rep = geo.GeodesicSolver(V, F, grid=1024).distance([s])
     assert rep['refined_sources'] == 0
     assert rel_errors(V, d, D, s)[0] > errs[0][0], errs
@@ -980,12 +1012,12 @@ def test_clamps_between_euclidean_and_edge_paths(monkeypatch):
         clamped += rep['clamped']['above_edges']
     assert above > 0 and clamped >= above
     # without the refined seed the same grid undershoots the 3D distance by far
-    old = geo.FINE_NODES
+    old = geo.FINE_NODES, geo.FINE_GIVEN_ALL
     try:
-        geo.FINE_NODES = 0.0
+        geo.FINE_NODES, geo.FINE_GIVEN_ALL = 0.0, False
         raw, rep = gs.distance([500], clamp=False)
     finally:
-        geo.FINE_NODES = old
+        geo.FINE_NODES, geo.FINE_GIVEN_ALL = old
     assert rep['refined_sources'] == 0
     assert int((raw < np.linalg.norm(V - V[500], axis=1) - 1e-12).sum()) > 20
 
