@@ -109,8 +109,8 @@ FINE_ANISO = 1.1      # or where a triangle at the source has a metric anisotrop
 # a lifted hemisphere's rim sources at 0.03-0.055 % mean from 512 to 1024 (one rising); at 31 they fall,
 # 0.017-0.019 -> 0.015-0.017 % (docs/geodesic.md, "Thirty-ninth session"). At most FINE_MAX_FACES
 # triangles: about 11M links for the two graphs, within the paths' memory budget. On a given grid finer
-# than FINE_GIVEN_NODES the points grow as the square root of its size and the window shrinks, its links
-# growing as the points (``fine_seed_paths``)
+# than FINE_GIVEN_NODES the points grow as the square root of its size over the same window, its links as
+# the points squared (``fine_seed_paths``: at 4096 the grid's own arrays still set most of the peak)
 FINE_STEINER_GIVEN = 31
 FINE_GIVEN_NODES = 1024
 # On a grid the user gives, every source takes the refined seed (not on a similarity chart, whose straight
