@@ -28,6 +28,15 @@ def rel_errors(V, d, D, s, exclude=0.05):
     return r.mean(), r.max()
 
 
+def _reference(name, j):
+    """Source ``j`` of ``tests/data/geodesic_ref_<name>.npz`` (exact MMP): ``(V, F, s, D, far)``, ``far``
+    the vertices more than 2 % of the bounding-box diagonal from the source ``s``."""
+    ref = np.load(os.path.join(DATA, f'geodesic_ref_{name}.npz'))
+    V, F = ref['V'], ref['F'].astype(np.int64)
+    s, D = int(ref['sources'][j]), ref['dist'][j]
+    return V, F, s, D, np.linalg.norm(V - V[s], axis=1) > 0.02 * np.linalg.norm(np.ptp(V, axis=0))
+
+
 @pytest.fixture(scope='module')
 def flat():
     V, F = make_surface('flat', 65)
@@ -320,10 +329,7 @@ def test_fitted_directions_lift_the_re_marches_undershoot_on_a_given_grid(monkey
     measured with (``FINE_GIVEN_ALL`` off: the refined seed, now taken by every source on a given grid,
     brings both to about 0.018 % here at 1024)."""
     monkeypatch.setattr(geo, 'FINE_GIVEN_ALL', False)
-    ref = np.load(os.path.join(DATA, 'geodesic_ref_deepcap.npz'))
-    V, F = ref['V'], ref['F'].astype(np.int64)
-    s, D = int(ref['sources'][0]), ref['dist'][0]
-    far = np.linalg.norm(V - V[s], axis=1) > 0.02 * np.linalg.norm(np.ptp(V, axis=0))
+    V, F, s, D, far = _reference('deepcap', 0)
     gs = geo.GeodesicSolver(V, F, grid=1024)
     err = {}
     for fit in (True, False):
@@ -1513,10 +1519,7 @@ def test_a_finer_given_grid_takes_more_steiner_points_over_the_same_window(monke
         assert rep['refined_sources'] == 1
         err[nodes] = rel_errors(V, d, D, s)[0]
     assert err[256] < err[plain] and err[256] < 3e-5, err
-    ref = np.load(os.path.join(DATA, 'geodesic_ref_lifted_hemisphere.npz'))
-    V, F = ref['V'], ref['F'].astype(np.int64)
-    s, D = int(ref['sources'][1]), ref['dist'][1]
-    far = np.linalg.norm(V - V[s], axis=1) > 0.02 * np.linalg.norm(np.ptp(V, axis=0))
+    V, F, s, D, far = _reference('lifted_hemisphere', 1)
     gs = geo.GeodesicSolver(V, F, grid=1024)
     err = {}
     for nodes in (plain, 512):
