@@ -16,7 +16,8 @@ cut along its seams, with its ``V`` and ``F``; ``geodesic_ref_scan_patch.npz`` t
 ``tests/meshgen.scan_patch(1500, 3)``, and ``geodesic_ref_lifted_hemisphere.npz`` the lifted hemisphere
 ``tests/meshgen.steep_rim(2000, 1, 0.5, 1.0)``, ``geodesic_ref_bevel_box.npz`` the bevelled cube
 ``tests/meshgen.bevel_box(3, 0.2)``, and ``geodesic_ref_deepcap.npz`` the deep noisy cap
-``core.surfaces.scan_like('deepcap')``, each with its ``V`` and ``F`` (``--closed`` writes these too)."""
+``core.surfaces.scan_like('deepcap')``, and ``geodesic_ref_finger.npz`` the narrow bump
+``tests/meshgen.finger(65)``, each with its ``V`` and ``F`` (``--closed`` writes these too)."""
 import argparse
 import os
 import sys
@@ -56,6 +57,10 @@ BEVEL_SOURCES = (0, 100, 200)
 # core.surfaces.scan_like('deepcap'), a deep noisy cap: the far source of bench/geodesic_real.py (a rim
 # vertex; its re-marches' undershoot on given grids, docs/geodesic.md "Forty-first session")
 DEEPCAP_SOURCES = (231,)
+# tests/meshgen.finger(65), a square lifted into a narrow bump that its map shrinks 1000-fold: a vertex
+# at (-0.9, 0), far from the finger, and the centre (0, 0), on its flank (docs/geodesic.md, "Forty-third
+# session")
+FINGER_SOURCES = (2083, 2112)
 
 
 def suzanne_island():
@@ -123,7 +128,7 @@ def main(argv=None):
     _mesh_ref('suzanne_island', "suzanne's largest island", Vi, Fi, (0, len(Vi) // 2, len(Vi) - 1))
     # a scan-like disk (random points, Delaunay-triangulated and lifted; tests/meshgen.py)
     sys.path.insert(0, os.path.join(ROOT, 'tests'))
-    from meshgen import bevel_box, scan_patch, steep_rim
+    from meshgen import bevel_box, finger, scan_patch, steep_rim
     _mesh_ref('scan_patch', 'scan_patch(1500, 3)', *scan_patch(1500, 3), SCAN_SOURCES)
     # a lifted hemisphere (z = sqrt(1 - r^2) over random points: needles at its vertical rim)
     _mesh_ref('lifted_hemisphere', 'steep_rim(2000, 1, 0.5, 1.0)', *steep_rim(2000, 1, 0.5, 1.0),
@@ -133,6 +138,8 @@ def main(argv=None):
     # a deep noisy cap (scan-like: random points, Delaunay-triangulated, lifted with noise)
     from core.surfaces import scan_like
     _mesh_ref('deepcap', "scan_like('deepcap')", *scan_like('deepcap')[:2], DEEPCAP_SOURCES)
+    # a narrow bump, a finger, that its conformal map shrinks 1000-fold (deep spots on a given grid)
+    _mesh_ref('finger', 'finger(65)', *finger(65), FINGER_SOURCES)
     if args.closed:
         return 0
     return _surfaces(REFS)

@@ -226,6 +226,20 @@ def closed_end_tube(n=24, rings=40, height=8.0, seed=0):
     return np.r_[V, [[0.0, 0.0, height]]], np.concatenate([lower, upper, cap])
 
 
+def finger(n=65, height=1.2, width=0.2):
+    """A square [-1, 1]^2 on an n x n grid of vertices (quads split along one diagonal) lifted into a
+    narrow bump, a finger: ``z = height exp(-((x - 0.3)^2 + y^2) / width^2)``. Its conformal map shrinks
+    the finger's top about 1000-fold (mu ratio 8e-4 at n = 65), so that a grid the user gives cannot
+    resolve it there (deep spots) while it resolves the rest. Returns V (n^2, 3) (row-major in y, x),
+    F (2 (n - 1)^2, 3)."""
+    x, y = np.meshgrid(np.linspace(-1.0, 1.0, n), np.linspace(-1.0, 1.0, n))
+    z = height * np.exp(-((x - 0.3) ** 2 + y ** 2) / width ** 2)
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
+    a = (j * n + i).ravel()
+    F = np.r_[np.c_[a, a + 1, a + n + 1], np.c_[a, a + n + 1, a + n]]
+    return np.c_[x.ravel(), y.ravel(), z.ravel()], F.astype(np.int64)
+
+
 def icosphere(level=3):
     """Unit sphere (V (n,3), F (m,3), counter-clockwise seen from outside): the icosahedron with every
     triangle split in four ``level`` times, the new vertices pushed onto the sphere."""

@@ -601,6 +601,29 @@ def test_on_a_given_grid_under_resolved_triangles_take_extrapolated_surface_path
         assert e[free & far].mean() < 6e-4 and e[far].max() < 5e-3, (grid, e[free & far].mean(), e[far].max())
 
 
+def test_a_deep_spot_s_window_starts_its_paths_where_the_grid_resolves_the_surface(monkeypatch):
+    """A narrow bump, a finger (``meshgen.finger``), that its map shrinks 1000-fold, on grids the user
+    gives: the grid cannot resolve the finger's top (deep spots, cells above a mean edge), and its nodes
+    next to those came out low. A window reached two rings round every spot, so its paths started from
+    those nodes. Now it reaches SPOT_RINGS_DEEP = 8 round a deep spot. From a vertex far from the finger
+    the mean error was 0.0099 / 0.0073 % at 512 / 1024 and is 0.0060 / 0.0037 %; without the
+    subdivision that a given grid makes here it rose with the grid, 0.0139 / 0.0219 / 0.0229 % at 512 /
+    1024 / 2048, and now falls, 0.0065 / 0.0057 / 0.0047 %. From the centre, on the finger's flank, the
+    window also holds the source's refined seed, and its vertices now seed the window's paths too: at
+    1024, 0.0154 % mean and 1.12 % max before, 0.0102 % and 0.63 % now. Reference: exact MMP."""
+    def error(j, grid):
+        V, F, s, D, far = _reference('finger', j)
+        d, _ = geo.GeodesicSolver(V, F, grid=grid).distance([s])
+        return np.abs(d[far] - D[far]) / D[far]
+    e512, e1024 = error(0, 512).mean(), error(0, 1024).mean()
+    assert e1024 < 0.8 * e512 and e1024 < 5e-5, (e512, e1024)
+    with monkeypatch.context() as m:
+        m.setattr(geo, 'SPOT_RINGS_DEEP', geo.SPOT_RINGS)
+        assert error(0, 1024).mean() > 1.6 * e1024
+    e = error(1, 1024)
+    assert e.mean() < 1.2e-4 and e.max() < 8e-3, (e.mean(), e.max())
+
+
 def test_finer_triangles_follow_the_seams_and_spare_parts_answered_by_paths():
     """Spot cut along its UV seams (13 islands, every one marched at a forced grid) is subdivided once:
     each seam edge is split in two with the mesh, the islands stay the same, and the distances (per

@@ -140,6 +140,12 @@ SPOT_MAX_FACES = 2000
 # (docs/geodesic.md, "Thirty-eighth session")
 SPOT_CELL_GIVEN = 0.25
 SPOT_MAX_FACES_GIVEN = 20_000
+# ... and round its deep spots, whose surface cell exceeds SPOT_DEEP_CELL of their mean edge, the window
+# reaches SPOT_RINGS_DEEP rings (the repaired vertices stay those of the spots' triangles and their
+# neighbours): the paths there start from grid nodes where the grid resolves the surface, not from the
+# marginal cells next to a deep spot, whose times came out low (docs/geodesic.md, "Forty-third session")
+SPOT_DEEP_CELL = 1.0
+SPOT_RINGS_DEEP = 8
 
 
 # --------------------------------------------------------------------------------------------------
@@ -342,29 +348,38 @@ class SpotWindow:
         G = ch.grid
         F, n = ch.F, len(ch.V)
         cell, max_faces = (SPOT_CELL_GIVEN, SPOT_MAX_FACES_GIVEN) if ch.given else (SPOT_CELL, SPOT_MAX_FACES)
-        severity = G.h / ch.mu_face / mean_edges(ch.V, F) / cell
+        surface_cell = G.h / ch.mu_face / mean_edges(ch.V, F)
+        severity = surface_cell / cell
         if ch.ginv is not None:
             severity = np.maximum(severity, metric_anisotropy(ch.ginv) / SPOT_ANISO)
+        deep = surface_cell > SPOT_DEEP_CELL if ch.given else None
+
+        def window(spot, less=0):
+            # the spots' triangles and SPOT_RINGS rings round them (SPOT_RINGS_DEEP round deep ones)
+            win = _grow(F, spot, SPOT_RINGS - less, n)
+            if deep is not None and (spot & deep).any():
+                win |= _grow(F, spot & deep, SPOT_RINGS_DEEP - less, n)
+            return win
         spot = severity > 1.0
         self.active = bool(spot.any())
         if not self.active:
             return
-        win = _grow(F, spot, SPOT_RINGS, n)
+        win = window(spot)
         if win.sum() > max_faces:
             # too many: the worst spots, by a severity threshold found by bisection (in log)
             lo, hi = 0.0, float(np.log(severity.max()))
             for _ in range(12):
                 mid = 0.5 * (lo + hi)
-                if _grow(F, severity > np.exp(mid), SPOT_RINGS, n).sum() > max_faces:
+                if window(severity > np.exp(mid)).sum() > max_faces:
                     lo = mid
                 else:
                     hi = mid
             spot = severity > np.exp(hi)
-            win = _grow(F, spot, SPOT_RINGS, n)
+            win = window(spot)
             self.active = bool(spot.any())
             if not self.active:
                 return
-        within = _grow(F, spot, SPOT_RINGS - 1, n)  # all but the outermost ring
+        within = window(spot, 1)                # all but the outermost ring
         outer = win & ~within
         inner = np.zeros(n, bool)
         inner[F[_grow(F, spot, 1, n)].ravel()] = True
@@ -397,7 +412,7 @@ class SpotWindow:
         Fw = Fl.reshape(-1, 3)
 
         def room(k):
-            return len(nodes) * (3 + 3 * k) + len(self.ring) + SteinerGraph.SPARE
+            return len(nodes) * (3 + 3 * k) + len(self.ring) + ch.given * len(self.used) + SteinerGraph.SPARE
         self.graph = SteinerGraph(ch.V[self.used], Fw, SPOT_STEINER, spare=room(SPOT_STEINER))
         k_half = (SPOT_STEINER - 1) // 2
         self.coarse = SteinerGraph(ch.V[self.used], Fw, k_half, patches=self.graph.patches,
@@ -414,16 +429,17 @@ class SpotWindow:
         cand, owner = graph.boundary(faces)
         return cand, np.linalg.norm(graph.P[cand] - X[owner], axis=1), nodes[owner]
 
-    def _search(self, graph, links, T, dist, loc, X_pts, pt_faces):
+    def _search(self, graph, links, T, dist, loc, X_pts, pt_faces, held):
         """(k,) the ``graph``'s shortest paths to the window's inner vertices from its seeds (see
-        ``repair``); ``links`` the graph's ``_node_links``; None when nothing seeds it."""
+        ``repair``); ``links`` the graph's ``_node_links``; ``held`` (h,) local vertices seeded with their
+        values in ``dist``; None when nothing seeds it."""
         cand0, length, node = links
         t = T.ravel()[node]
         ok = np.isfinite(t)
         cand, w = cand0[ok], t[ok] + length[ok]
         tv = dist[self.ring]
         okv = np.isfinite(tv)
-        cand, w = np.r_[cand, self.ring_local[okv]], np.r_[w, tv[okv]]
+        cand, w = np.r_[cand, self.ring_local[okv], held], np.r_[w, tv[okv], dist[self.used[held]]]
         at = np.searchsorted(self.used, loc)
         mine = (at < len(self.used)) & (self.used[np.minimum(at, len(self.used) - 1)] == loc)
         cand, w = np.r_[cand, at[mine]], np.r_[w, np.zeros(int(mine.sum()))]
@@ -442,15 +458,19 @@ class SpotWindow:
         """Set ``dist`` (k,) at the inner vertices (not where ``keep`` (k,) is True) to the window's
         shortest paths from the grid times ``T`` (ny, nx) of the outermost ring's nodes, from the
         sampled times ``dist`` of its outer vertices, and from the sources inside the window: local
-        vertices ``loc`` (a,) and surface points ``X_pts`` (b,3) in local faces ``pt_faces`` (b,). With
-        the coarse graph (a given grid) the paths' excess is extrapolated away at the vertices, which
-        both graphs share: ``d_k - max(0, d_(k-1)/2 - d_k) / (2^STEINER_ORDER - 1)``. Returns the
-        number of vertices set."""
-        d = self._search(self.graph, self.links[0], T, dist, loc, X_pts, pt_faces)
+        vertices ``loc`` (a,) and surface points ``X_pts`` (b,3) in local faces ``pt_faces`` (b,). On a
+        given grid (the coarse graph) the window's vertices that ``keep`` holds (a refined seed's, whose
+        paths have more points than the window's) seed it with their values too, and the paths' excess
+        is extrapolated away at the vertices, which both graphs share:
+        ``d_k - max(0, d_(k-1)/2 - d_k) / (2^STEINER_ORDER - 1)``. Returns the number of vertices set."""
+        held = np.zeros(0, np.int64)
+        if self.coarse is not None:
+            held = np.flatnonzero(keep[self.used] & np.isfinite(dist[self.used]))
+        d = self._search(self.graph, self.links[0], T, dist, loc, X_pts, pt_faces, held)
         if d is None:
             return 0
         dc = None if self.coarse is None else self._search(self.coarse, self.links[1], T, dist, loc, X_pts,
-                                                            pt_faces)
+                                                            pt_faces, held)
         if dc is not None:
             d = d - np.maximum(richardson_excess(dc, d), 0.0)
         sel = np.isfinite(d) & ~keep[self.inner]
