@@ -342,7 +342,10 @@ class SpotWindow:
     ``SPOT_CELL_GIVEN`` mean edges, the window may hold ``SPOT_MAX_FACES_GIVEN`` triangles, and the
     paths are extrapolated from a second graph of half the points (``coarse``), so that the
     triangles the grid cannot resolve take the paths' accuracy rather than ``MeshRelax``'s first
-    order. ``ch`` a ``Chart`` (its grid rasterised). ``active`` False when the chart has no spot."""
+    order; round a deep spot (a cell above ``SPOT_DEEP_CELL`` mean edges) the window reaches
+    ``SPOT_RINGS_DEEP`` rings, so that its paths start where the grid resolves the surface, and the
+    vertices a refined seed holds seed its paths with their values. ``ch`` a ``Chart`` (its grid
+    rasterised). ``active`` False when the chart has no spot."""
 
     def __init__(self, ch):
         G = ch.grid
