@@ -378,12 +378,13 @@ class SpotWindow:
     Where the window would hold more than ``SPOT_MAX_FACES`` triangles, it is built round the worst
     spots only (a severity threshold, the larger of cell / ``SPOT_CELL`` and anisotropy /
     ``SPOT_ANISO``, found by bisection). On a grid the user gives (``ch.given``) a spot is a cell above
-    ``spot_cell_given(ch.size)`` mean edges, the window may hold ``SPOT_MAX_FACES_GIVEN`` triangles, and the
-    paths are extrapolated from a second graph of half the points (``coarse``), so that the
-    triangles the grid cannot resolve take the paths' accuracy rather than ``MeshRelax``'s first
-    order; round a deep spot (a cell above ``SPOT_DEEP_CELL`` mean edges) the window reaches
-    ``SPOT_RINGS_DEEP`` rings, so that its paths start where the grid resolves the surface, and the
-    vertices a refined seed holds seed its paths with their values. ``ch`` a ``Chart`` (its grid
+    ``SPOT_CELL_GIVEN`` mean edges (``spot_cell_given(ch.size)`` where ``mu_jump`` exceeds
+    ``SPOT_JUMP``), the window may hold ``SPOT_MAX_FACES_GIVEN`` triangles, and the paths are
+    extrapolated from a second graph of half the points (``coarse``), so that the triangles the grid
+    cannot resolve take the paths' accuracy rather than ``MeshRelax``'s first order; round a deep spot
+    (a cell above ``SPOT_DEEP_CELL`` mean edges) the window reaches ``SPOT_RINGS_DEEP`` rings, so that
+    its paths start where the grid resolves the surface, and the vertices a refined seed holds seed its
+    paths with their values. ``ch`` a ``Chart`` (its grid
     rasterised). ``active`` False when the chart has no spot."""
 
     def __init__(self, ch):
